@@ -1,0 +1,41 @@
+"""Elastic characters: the mass-spring core, integrators, constraints, materials, motion clips
+and the three puppet kinds (image, latex, medial).
+
+Names are resolved lazily so that importing one puppet kind never pulls in the heavy
+dependencies of another (trimesh, OpenCV, pyrender)."""
+from importlib import import_module
+
+_EXPORTS = {
+    # core (model / state / control)
+    "MassSpring": "characters.model",
+    "SpringState": "characters.model",
+    "Control": "characters.control",
+    # integrators
+    "ImplicitEuler": "characters.integrators",
+    "Verlet": "characters.integrators",
+    "ProjectiveDynamics": "characters.integrators",
+    "StepReport": "characters.integrators",
+    # constraints and materials
+    "CircumsphereConstraint": "characters.constraints",
+    "SpringReductionConstraint": "characters.constraints",
+    "Material": "characters.materials",
+    "material": "characters.materials",
+    "material_names": "characters.materials",
+    # motion clips
+    "Motion": "characters.motion",
+    # puppet kinds
+    "ImagePuppet": "characters.image_puppet",
+    "LatexPuppet": "characters.latex",
+    "MedialObject": "characters.medial",
+}
+
+__all__ = sorted(_EXPORTS)
+
+
+def __getattr__(name):
+    module = _EXPORTS.get(name)
+    if module is None:
+        raise AttributeError(f"module 'characters' has no attribute {name!r}")
+    value = getattr(import_module(module), name)
+    globals()[name] = value
+    return value

@@ -15,14 +15,19 @@ _EXPORTS = {
     "Verlet": "characters.integrators",
     "ProjectiveDynamics": "characters.integrators",
     "StepReport": "characters.integrators",
+    "Integrator": "characters.integrators",
     # constraints and materials
     "CircumsphereConstraint": "characters.constraints",
     "SpringReductionConstraint": "characters.constraints",
     "Material": "characters.materials",
     "material": "characters.materials",
     "material_names": "characters.materials",
+    "load_materials": "characters.materials",
+    "tetrahedral_lattice": "characters.model",
     # motion clips
     "Motion": "characters.motion",
+    "blend": "characters.motion",
+    "Interpolation": "characters.motion",
     # puppet kinds
     "ImagePuppet": "characters.image_puppet",
     "LatexPuppet": "characters.latex",

@@ -1,0 +1,297 @@
+"""Benchmark of the elastic simulation core (issue 3): frame times, accuracy, force pass.
+
+    python3 benchmarks/sim.py                 # everything (~15-25 min on a loaded 2-core box)
+    python3 benchmarks/sim.py --quick         # smaller run: no 30k mesh, 1 min long run
+    python3 benchmarks/sim.py --long-minutes 0  # skip the 10-minute stability run
+
+Meshes: hollow head-like ellipsoidal shells (10 x 12 x 10 cm), tetrahedralised lattices of
+stiff rubber (E = 1.5 MPa, 1100 kg/m^3, see characters/materials.toml [stiff_rubber]), at the
+latex paper's Table 1 sizes (masses/springs 3,744/6,952, 5,664/15,056, 9,978/25,892: thin
+shells with springs dropped to the paper's count) and at ~10k/45k and ~30k/130k (2.5 cells
+thick, ~4.5 springs per mass). The hand holds the neck (the lowest nodes, pinned) and shakes
+it: 2 cm at 3 Hz sideways, 1 cm at 2 Hz up and down, under gravity.
+
+Printed per mesh and integrator: ms per 1/25 s and 1/60 s frame (median, p90), RMS deviation
+from a converged reference (explicit Verlet with steps 4x below its stability limit), the
+speed ratio to a plain NumPy explicit integrator in the same process, and the force pass in
+springs per second. A picture of the deviation over time goes to docs/img/sim_shaken_head.png.
+"""
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from characters import Control, ImplicitEuler, MassSpring, ProjectiveDynamics, Verlet, material
+from characters import kernels
+from characters.model import tetrahedral_lattice
+
+ROOT = Path(__file__).resolve().parents[1]
+HEAD_RADII = np.array([0.05, 0.06, 0.05])  # [m]: a 10 cm wide, 12 cm tall head
+
+
+def head_shell(cells: int, thickness: float, *, springs: int | None = None, seed: int = 0):
+    """Tetrahedralised ellipsoidal shell: `cells` lattice cells across 10 cm, `thickness` in
+    cells. springs: drop randomly chosen diagonal springs down to this count."""
+    spacing = 0.1 / cells
+    centre = HEAD_RADII.copy()
+
+    def inside(points):
+        outer = (((points - centre) / HEAD_RADII) ** 2).sum(1) <= 1
+        inner = (((points - centre) / (HEAD_RADII - thickness * spacing)) ** 2).sum(1) >= 1
+        return outer & inner
+
+    x, pairs, _ = tetrahedral_lattice((cells, int(round(cells * 1.2)), cells), spacing,
+                                      inside=inside)
+    if springs is not None and springs < len(pairs):
+        length = np.linalg.norm(x[pairs[:, 1]] - x[pairs[:, 0]], axis=1)
+        diagonal = np.flatnonzero(length > 1.01 * spacing)
+        drop = np.random.default_rng(seed).choice(diagonal, len(pairs) - springs, replace=False)
+        pairs = np.delete(pairs, drop, axis=0)
+    return x, pairs, spacing
+
+
+def rubber_model(x, pairs, spacing):
+    rest = np.linalg.norm(x[pairs[:, 1]] - x[pairs[:, 0]], axis=1)
+    rubber = material("stiff_rubber")
+    k, c, m = rubber.lattice_parameters(rest, spacing=spacing)
+    return MassSpring(x, pairs, stiffness=k, damping=c, mass=m, gravity=(0, 0, -9.81),
+                      velocity_damping=rubber.velocity_damping_rate())
+
+
+def neck(model, spacing):
+    z = model.rest_positions[:, 2]
+    return np.flatnonzero(z < z.min() + 1.6 * spacing)
+
+
+def hand(t):
+    """(3,) [m] offset of the hand holding the neck at time t [s]."""
+    return np.array([0.02 * math.sin(2 * math.pi * 3 * t), 0.0,
+                     0.01 * math.sin(2 * math.pi * 2 * t)])
+
+
+def max_frequency(model) -> float:
+    """Gershgorin bound on the highest angular frequency [rad/s]: sqrt(max 2 sum k / m)."""
+    incident = np.bincount(model.springs[:, 0], model.stiffness, model.node_count) + \
+        np.bincount(model.springs[:, 1], model.stiffness, model.node_count)
+    return float(np.sqrt(np.max(2 * incident / model.mass)))
+
+
+def verlet_substeps(model, dt, safety=0.9) -> int:
+    """Substeps keeping h below safety x 2 / omega_max."""
+    return max(1, math.ceil(dt * max_frequency(model) / (2 * safety)))
+
+
+def run(model, integrator, dt, frames, pins, *, record=None, progress=None):
+    """Shake for `frames` steps of dt; returns per-step seconds and reports."""
+    state = model.state()
+    seconds = np.empty(frames)
+    failures = 0
+    retries = 0
+    for n in range(frames):
+        t = (n + 1) * dt
+        control = Control(pins=(pins, model.rest_positions[pins] + hand(t)))
+        start = time.perf_counter()
+        report = integrator.step(model, state, dt, control)
+        seconds[n] = time.perf_counter() - start
+        failures += not report.ok
+        retries += report.retries
+        if record is not None:
+            record.append(state.x.copy())
+        if progress and n % progress == 0 and n:
+            print(f"      ... {n}/{frames} steps ({n * dt:.0f} s simulated)", flush=True)
+    return seconds, failures, retries, state
+
+
+def numpy_explicit_step(model, x, v, h, pins, goal):
+    """The plain NumPy explicit integrator (same scheme as Verlet): the baseline."""
+    i, j = model.springs[:, 0], model.springs[:, 1]
+    e = x[j] - x[i]
+    length = np.sqrt(np.einsum("ij,ij->i", e, e))
+    u = e / length[:, None]
+    rel = np.einsum("ij,ij->i", v[j] - v[i], u)
+    magnitude = model.stiffness * (length - model.rest_length) + model.damping * rel
+    f = magnitude[:, None] * u
+    force = np.zeros_like(x)
+    np.add.at(force, i, f)
+    np.subtract.at(force, j, f)
+    force += model.mass[:, None] * model.gravity
+    v *= math.exp(-model.velocity_damping * h)
+    v += h * force / model.mass[:, None]
+    v[pins] = (goal - x[pins]) / h
+    x += h * v
+    x[pins] = goal
+
+
+def force_pass_rate(model, repeats=200) -> tuple[float, float]:
+    """Springs per second of the compiled force kernels: (elastic only, elastic + damping)."""
+    rng = np.random.default_rng(1)
+    x = model.rest_positions + 1e-4 * rng.normal(size=model.rest_positions.shape)
+    v = rng.normal(size=x.shape) * 0.01
+    out = np.zeros_like(x)
+    rates = []
+    for kernel, args in ((kernels.spring_forces_elastic_3d,
+                          (x, model.springs, model.rest_length, model.stiffness, out)),
+                         (kernels.spring_forces,
+                          (x, v, model.springs, model.rest_length, model.stiffness,
+                           model.damping, out))):
+        kernel(*args)
+        times = []
+        for _ in range(repeats):
+            start = time.perf_counter()
+            kernel(*args)
+            times.append(time.perf_counter() - start)
+        rates.append(model.spring_count / float(np.median(times)))
+    return rates[0], rates[1]
+
+
+def integrators(model, dt):
+    return {
+        "projective (10 it)": ProjectiveDynamics(iterations=10),
+        "projective (5 it)": ProjectiveDynamics(iterations=5),
+        "implicit Euler (PCG)": ImplicitEuler(tolerance=1e-3, max_iterations=200),
+        "Verlet (stable substeps)": Verlet(substeps=verlet_substeps(model, dt)),
+    }
+
+
+def rms_per_frame(trajectory, reference):
+    return np.sqrt(np.mean(np.sum((np.asarray(trajectory) - np.asarray(reference)) ** 2, -1),
+                           -1))
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--quick", action="store_true", help="smaller run (no 30k mesh)")
+    parser.add_argument("--seconds", type=float, default=2.0,
+                        help="simulated seconds per timing run (default 2)")
+    parser.add_argument("--long-minutes", type=float, default=10.0,
+                        help="simulated minutes of the stability run on 10k/45k (0 skips)")
+    parser.add_argument("--no-picture", action="store_true")
+    args = parser.parse_args(argv)
+    if args.quick:
+        args.long_minutes = min(args.long_minutes, 1.0)
+
+    meshes = [
+        ("Table 1 row 2", dict(cells=30, thickness=1.2, springs=6952), 3744),
+        ("Table 1 row 3", dict(cells=36, thickness=1.3, springs=15056), 5664),
+        ("Table 1 row 4", dict(cells=47, thickness=1.3, springs=25892), 9978),
+        ("10k / 45k", dict(cells=36, thickness=2.5), None),
+    ]
+    if not args.quick:
+        meshes.append(("30k / 130k", dict(cells=60, thickness=2.5), None))
+
+    print("mop simulation benchmark: stiff rubber head shaken by the hand (3 Hz, 2 cm)")
+    print(f"python {sys.version.split()[0]}, numpy {np.__version__}; timings are wall clock "
+          f"on this machine, one thread\n")
+    rows = []
+    curves = {}
+    for label, spec, paper_nodes in meshes:
+        x, pairs, spacing = head_shell(**spec)
+        model = rubber_model(x, pairs, spacing)
+        pins = neck(model, spacing)
+        elastic, damped = force_pass_rate(model)
+        print(f"== {label}: {model.node_count} masses, {model.spring_count} springs "
+              f"({model.spring_count / model.node_count:.2f}/mass), {pins.size} pinned; "
+              f"omega_max {max_frequency(model):.0f} rad/s")
+        print(f"   force pass: {elastic / 1e6:.0f} M springs/s elastic, {damped / 1e6:.0f} M "
+              f"springs/s with damping")
+        rows.append((label, model.node_count, model.spring_count, "force pass", elastic, damped))
+        accuracy_here = label == "10k / 45k"
+        for rate in (25, 60):
+            dt = 1.0 / rate
+            frames = max(10, int(round(args.seconds * rate)))
+            reference = None
+            if accuracy_here:
+                substeps = 4 * verlet_substeps(model, dt)
+                print(f"   reference at {rate} fps: Verlet, {substeps} substeps per frame ...",
+                      flush=True)
+                reference = []
+                run(model, Verlet(substeps=substeps, check_energy=False), dt, frames, pins,
+                    record=reference)
+            # the plain NumPy explicit integrator: time a few frames at the stable substeps
+            substeps = verlet_substeps(model, dt)
+            state = model.state()
+            h = dt / substeps
+            sample = min(frames, 3)
+            start = time.perf_counter()
+            for n in range(sample):
+                goal = model.rest_positions[pins] + hand((n + 1) * dt)
+                for _ in range(substeps):
+                    numpy_explicit_step(model, state.x, state.v, h, pins, goal)
+            numpy_ms = (time.perf_counter() - start) / sample * 1e3
+            print(f"   {rate} fps: plain NumPy explicit ({substeps} substeps): "
+                  f"{numpy_ms:.1f} ms/frame")
+            for name, integrator in integrators(model, dt).items():
+                integrator.step(model, model.state(), dt)  # compile / factorise outside timing
+                record = [] if reference is not None else None
+                seconds, failures, retries, _ = run(model, integrator, dt, frames, pins,
+                                                    record=record)
+                ms = seconds[1:] * 1e3  # the first step includes the factorisation
+                rms = (float(np.sqrt(np.mean(rms_per_frame(record, reference) ** 2)))
+                       if record is not None else math.nan)
+                if record is not None:
+                    curves[(rate, name)] = rms_per_frame(record, reference)
+                print(f"   {rate} fps {name:26s} median {np.median(ms):7.2f} ms  p90 "
+                      f"{np.percentile(ms, 90):7.2f} ms  x{numpy_ms / np.median(ms):7.1f} vs "
+                      f"NumPy  RMS {rms * 1e3:6.3f} mm  failures {failures} retries {retries}",
+                      flush=True)
+                rows.append((label, model.node_count, model.spring_count, f"{rate} fps {name}",
+                             float(np.median(ms)), float(np.percentile(ms, 90)), rms,
+                             numpy_ms / np.median(ms), failures))
+        if paper_nodes:
+            print(f"   (the paper's row: {paper_nodes} masses; ours differs by "
+                  f"{model.node_count - paper_nodes:+d})")
+        print()
+
+    if args.long_minutes > 0:
+        x, pairs, spacing = head_shell(cells=36, thickness=2.5)
+        model = rubber_model(x, pairs, spacing)
+        pins = neck(model, spacing)
+        frames = int(args.long_minutes * 60 * 60)
+        print(f"== stability: {args.long_minutes:g} simulated minutes at 60 fps on "
+              f"{model.node_count}/{model.spring_count} with the default integrator")
+        integrator = ProjectiveDynamics()
+        seconds, failures, retries, state = run(model, integrator, 1 / 60, frames, pins,
+                                                progress=frames // 10)
+        drift = np.abs(state.x - model.rest_positions).max()
+        finite = bool(np.all(np.isfinite(state.x)))
+        print(f"   {frames} steps: failures {failures}, retries {retries}, finite {finite}, "
+              f"max displacement at the end {drift * 1e3:.1f} mm, median "
+              f"{np.median(seconds) * 1e3:.2f} ms, p90 {np.percentile(seconds, 90) * 1e3:.2f} ms")
+
+    if curves and not args.no_picture:
+        picture(curves, ROOT / "docs" / "img" / "sim_shaken_head.png")
+    return 0
+
+
+def picture(curves, path):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 2, figsize=(10, 3.6), sharey=True)
+    for ax, rate in zip(axes, (25, 60)):
+        for (r, name), curve in curves.items():
+            if r == rate:
+                ax.plot(np.arange(1, len(curve) + 1) / rate, curve * 1e3, label=name)
+        ax.axhline(2.5, color="k", ls=":", lw=1, label="2.5 mm target")
+        ax.set_title(f"1/{rate} s steps")
+        ax.set_xlabel("time [s]")
+        ax.grid(alpha=0.3)
+    axes[0].set_ylabel("RMS deviation from reference [mm]")
+    axes[1].legend(fontsize=8)
+    fig.suptitle("10k/45k stiff-rubber head shaken by the hand: deviation from converged "
+                 "explicit reference", fontsize=10)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=90)
+    print(f"picture: {path.relative_to(ROOT)}")
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

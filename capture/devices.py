@@ -1,0 +1,31 @@
+"""What is plugged in: HID devices with the profiles that fit them, cameras that open, and how
+to reach the OSC source. Used by `mop devices`."""
+from __future__ import annotations
+
+import logging
+
+log = logging.getLogger(__name__)
+
+
+def list_devices(*, cameras: bool = True) -> dict:
+    """{"hid": [...], "hid_error": str, "profiles": {name: title}, "cameras": [...],
+    "camera_error": str, "osc": {"host", "port", "address", "spec"}}."""
+    result: dict = {"hid": [], "hid_error": "", "profiles": {}, "cameras": [],
+                    "camera_error": ""}
+    try:
+        from .hid.profile import available_profiles
+        result["profiles"] = {name: p.title for name, p in sorted(available_profiles().items())}
+        from .hid.source import list_hid_devices
+        result["hid"] = list_hid_devices()
+    except ImportError as error:
+        result["hid_error"] = str(error)
+    if cameras:
+        try:
+            from .camera.source import list_cameras
+            result["cameras"] = list_cameras()
+        except ImportError as error:
+            result["camera_error"] = str(error)
+    from .osc import WEKINATOR_ADDRESS, WEKINATOR_PORT
+    result["osc"] = {"host": "127.0.0.1", "port": WEKINATOR_PORT, "address": WEKINATOR_ADDRESS,
+                     "spec": f"osc:127.0.0.1:{WEKINATOR_PORT}{WEKINATOR_ADDRESS}"}
+    return result

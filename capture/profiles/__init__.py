@@ -1,0 +1,1 @@
+"""Shipped HID device profiles (TOML data files, read by `capture.hid.profile`)."""

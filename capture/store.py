@@ -1,0 +1,633 @@
+"""The take store's file layer: one SQLite file holding timestamped frame streams, metadata and
+named JSON attachments, written while capturing.
+
+Crash safety: the file is in WAL mode and a background thread commits whatever was appended at
+least every `commit_interval` (default 50 ms). A committed transaction survives the death of the
+process (SIGKILL included: it is in the WAL, in the OS page cache), so a killed recording keeps
+everything but the last commit interval, and the file opens again as an incomplete take.
+`synchronous=NORMAL` trades the last commits on *power loss* for speed; a process crash loses
+nothing that was committed.
+
+Schema (version 1)::
+
+    meta(key TEXT PRIMARY KEY, value TEXT)        -- JSON values: format, schema_version,
+                                                  -- created, complete, metadata
+    streams(id INTEGER PRIMARY KEY, name TEXT UNIQUE, channels TEXT, rate REAL, metadata TEXT)
+    frames(stream INTEGER, seq INTEGER, t REAL, data BLOB,   -- data: D float64 little-endian
+           PRIMARY KEY (stream, seq)) WITHOUT ROWID
+    attachments(name TEXT PRIMARY KEY, content TEXT)          -- JSON text
+
+`PRAGMA application_id` is 0x4D4F5054 ("MOPT") and `user_version` the schema version, so a foreign
+SQLite file is told apart at once. A damaged or foreign file raises `StoreError`, whose
+`salvaged` holds whatever could be read (`salvage(path)` does the same without raising).
+
+This module is usable on its own (numpy and the standard library only); `mop.takes` builds takes
+on it and the replay source reads it.
+"""
+from __future__ import annotations
+
+import datetime as _dt
+import json
+import logging
+import math
+import os
+import sqlite3
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Iterable, Mapping, Sequence
+from urllib.parse import quote
+
+import numpy as np
+
+log = logging.getLogger(__name__)
+
+FORMAT = "mop-take-store"
+SCHEMA_VERSION = 1
+APPLICATION_ID = 0x4D4F5054          # "MOPT"
+SUFFIX = ".sqlite"
+_SQLITE_MAGIC = b"SQLite format 3\x00"
+_TABLES = ("meta", "streams", "frames", "attachments")
+
+_SCHEMA = """
+CREATE TABLE meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
+CREATE TABLE streams (id INTEGER PRIMARY KEY, name TEXT NOT NULL UNIQUE,
+                      channels TEXT NOT NULL, rate REAL NOT NULL, metadata TEXT NOT NULL);
+CREATE TABLE frames (stream INTEGER NOT NULL, seq INTEGER NOT NULL, t REAL NOT NULL,
+                     data BLOB NOT NULL, PRIMARY KEY (stream, seq)) WITHOUT ROWID;
+CREATE TABLE attachments (name TEXT PRIMARY KEY, content TEXT NOT NULL);
+"""
+
+
+class StoreError(ValueError):
+    """A file that is not a readable take store. `salvaged` is a `StoreContents` with what could
+    be read (and its `problems`), or None when nothing could."""
+
+    def __init__(self, message: str, *, path: Path | str | None = None,
+                 salvaged: "StoreContents | None" = None):
+        super().__init__(message)
+        self.path = Path(path) if path is not None else None
+        self.salvaged = salvaged
+
+
+@dataclass(frozen=True)
+class Stream:
+    """One stored stream: times (N,) float [s] (capture clock), values (N, D) float64 (NaN =
+    missing), channels (D names), rate [Hz] (nominal, 0 = unknown), metadata (JSON dict)."""
+    name: str
+    channels: tuple[str, ...]
+    rate: float
+    metadata: dict
+    times: np.ndarray
+    values: np.ndarray
+
+    @property
+    def duration(self) -> float:
+        return float(self.times[-1] - self.times[0]) if self.times.size else 0.0
+
+
+@dataclass
+class StoreContents:
+    """Everything in one store file. `complete` is False for a recording that was interrupted;
+    `problems` lists what was wrong with a damaged file (empty for a healthy one)."""
+    path: Path
+    metadata: dict
+    streams: dict[str, Stream]
+    attachments: dict[str, Any]
+    complete: bool
+    created: str
+    schema_version: int
+    problems: list[str] = field(default_factory=list)
+
+
+def _now_iso() -> str:
+    return _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
+
+
+def _json(value: Any, what: str) -> str:
+    try:
+        return json.dumps(value, allow_nan=False, separators=(",", ":"))
+    except (TypeError, ValueError) as error:
+        raise TypeError(f"{what} must be JSON-serialisable (no NaN, no arrays): {error}") from None
+
+
+# ------------------------------------------------------------------------------------------
+# writing
+
+
+@dataclass
+class WriterStats:
+    """What a writer measured: commits made, frames written, the longest gap between two
+    commits while frames were waiting [s], and the oldest a frame ever got before its commit [s]
+    (the most a crash could lose)."""
+    commits: int = 0
+    frames: int = 0
+    worst_commit_interval: float = 0.0
+    worst_unsaved_age: float = 0.0
+    commit_seconds: list[float] = field(default_factory=list)
+
+
+class StoreWriter:
+    """Writes one store file while capturing; thread-safe.
+
+    Parameters
+    ----------
+    path : the new file (`.sqlite`); an existing file is an error unless overwrite=True.
+    metadata : JSON dict stored with the file (replace later with `set_metadata`).
+    commit_interval : [s] between background commits (<= 0.1; default 0.05).
+    """
+
+    def __init__(self, path: str | os.PathLike, *, metadata: Mapping | None = None,
+                 commit_interval: float = 0.05, overwrite: bool = False):
+        if not 0 < commit_interval <= 0.1:
+            raise ValueError(f"commit_interval must be in (0, 0.1] s so that a crash loses at "
+                             f"most 100 ms, got {commit_interval!r}")
+        self.path = Path(path)
+        if self.path.exists():
+            if not overwrite:
+                raise FileExistsError(f"{self.path} already exists (pass overwrite=True to "
+                                      f"replace it)")
+            remove_store_file(self.path)
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self.commit_interval = float(commit_interval)
+        self.stats = WriterStats()
+        self._db = sqlite3.connect(str(self.path), check_same_thread=False, isolation_level=None)
+        self._db_lock = threading.Lock()
+        self._pending: list[tuple] = []
+        self._pending_since: float | None = None
+        self._pending_lock = threading.Lock()
+        self._streams: dict[str, tuple[int, int]] = {}      # name -> (id, D)
+        self._next_seq: dict[int, int] = {}
+        self._last_commit = time.monotonic()
+        self._error: BaseException | None = None
+        self._closed = False
+        db = self._db
+        db.execute("PRAGMA journal_mode=WAL")
+        db.execute("PRAGMA synchronous=NORMAL")
+        db.execute(f"PRAGMA application_id={APPLICATION_ID}")
+        db.execute(f"PRAGMA user_version={SCHEMA_VERSION}")
+        db.execute("BEGIN")
+        for statement in _SCHEMA.strip().split(";"):
+            if statement.strip():
+                db.execute(statement)
+        meta = {"format": FORMAT, "schema_version": SCHEMA_VERSION, "created": _now_iso(),
+                "complete": False, "metadata": dict(metadata or {})}
+        db.executemany("INSERT INTO meta(key, value) VALUES (?, ?)",
+                       [(k, _json(v, f"metadata {k!r}")) for k, v in meta.items()])
+        db.execute("COMMIT")
+        self._stop = threading.Event()
+        self._flusher = threading.Thread(target=self._flush_loop, name="mop-store-commit",
+                                         daemon=True)
+        self._flusher.start()
+
+    # -- structure --------------------------------------------------------------------------
+    def add_stream(self, name: str, channels: Sequence[str], *, rate: float = 0.0,
+                   metadata: Mapping | None = None) -> str:
+        """Declare a stream of D = len(channels) values per frame; returns its name."""
+        self._check_open()
+        if not isinstance(name, str) or not name:
+            raise TypeError(f"a stream name must be a non-empty string, got {name!r}")
+        if name in self._streams:
+            raise ValueError(f"stream {name!r} already exists in {self.path}")
+        channels = [str(c) for c in channels]
+        if not channels:
+            raise ValueError(f"stream {name!r} needs at least one channel")
+        with self._db_lock:
+            cursor = self._db.execute(
+                "INSERT INTO streams(name, channels, rate, metadata) VALUES (?, ?, ?, ?)",
+                (name, _json(channels, "channels"), float(rate),
+                 _json(dict(metadata or {}), f"stream {name!r} metadata")))
+        stream_id = int(cursor.lastrowid)
+        self._streams[name] = (stream_id, len(channels))
+        self._next_seq[stream_id] = 0
+        return name
+
+    def set_metadata(self, metadata: Mapping) -> None:
+        """Replace the file's metadata (committed at once)."""
+        self._meta("metadata", dict(metadata))
+
+    def put_attachment(self, name: str, content: Any) -> None:
+        """Store a JSON-serialisable object under `name` (committed at once)."""
+        self._check_open()
+        text = _json(content, f"attachment {name!r}")
+        with self._db_lock:
+            self._db.execute("INSERT OR REPLACE INTO attachments(name, content) VALUES (?, ?)",
+                             (str(name), text))
+
+    def _meta(self, key: str, value: Any) -> None:
+        self._check_open()
+        text = _json(value, f"metadata {key!r}")
+        with self._db_lock:
+            self._db.execute("INSERT OR REPLACE INTO meta(key, value) VALUES (?, ?)", (key, text))
+
+    # -- frames -----------------------------------------------------------------------------
+    def append(self, stream: str, t: float, values) -> None:
+        """Queue one frame (t [s], values (D,) float) of `stream`; committed within
+        `commit_interval`."""
+        stream_id, width = self._stream(stream)
+        row = np.ascontiguousarray(values, dtype="<f8")
+        if row.shape != (width,):
+            raise ValueError(f"stream {stream!r} takes ({width},) values per frame, got shape "
+                             f"{row.shape}")
+        t = float(t)
+        if not math.isfinite(t):
+            raise ValueError(f"frame time must be finite, got {t!r}")
+        with self._pending_lock:
+            seq = self._next_seq[stream_id]
+            self._next_seq[stream_id] = seq + 1
+            self._pending.append((stream_id, seq, t, row.tobytes()))
+            if self._pending_since is None:
+                self._pending_since = time.monotonic()
+
+    def append_many(self, stream: str, times, values) -> None:
+        """Queue N frames: times (N,) [s], values (N, D)."""
+        stream_id, width = self._stream(stream)
+        times = np.asarray(times, dtype=np.float64)
+        block = np.ascontiguousarray(values, dtype="<f8")
+        if times.ndim != 1 or block.shape != (times.shape[0], width):
+            raise ValueError(f"stream {stream!r}: expected times (N,) and values (N, {width}), "
+                             f"got {times.shape} and {block.shape}")
+        if not np.all(np.isfinite(times)):
+            raise ValueError("frame times must be finite")
+        with self._pending_lock:
+            first = self._next_seq[stream_id]
+            self._next_seq[stream_id] = first + times.shape[0]
+            self._pending.extend((stream_id, first + i, float(t), block[i].tobytes())
+                                 for i, t in enumerate(times))
+            if self._pending_since is None:
+                self._pending_since = time.monotonic()
+
+    def frame_count(self, stream: str) -> int:
+        """Frames appended to `stream` so far (committed or not)."""
+        stream_id, _ = self._stream(stream)
+        return self._next_seq[stream_id]
+
+    def flush(self) -> None:
+        """Commit every queued frame now."""
+        with self._pending_lock:
+            rows, self._pending = self._pending, []
+            since, self._pending_since = self._pending_since, None
+        if not rows:
+            return
+        started = time.monotonic()
+        with self._db_lock:
+            self._db.execute("BEGIN")
+            try:
+                self._db.executemany(
+                    "INSERT INTO frames(stream, seq, t, data) VALUES (?, ?, ?, ?)", rows)
+                self._db.execute("COMMIT")
+            except BaseException:
+                self._db.execute("ROLLBACK")
+                raise
+        done = time.monotonic()
+        stats = self.stats
+        stats.commits += 1
+        stats.frames += len(rows)
+        stats.commit_seconds.append(done - started)
+        stats.worst_unsaved_age = max(stats.worst_unsaved_age, done - since)
+        if since <= self._last_commit + self.commit_interval:
+            # frames were waiting since the previous commit: this gap is a commit interval
+            stats.worst_commit_interval = max(stats.worst_commit_interval,
+                                              done - self._last_commit)
+        self._last_commit = done
+
+    def _flush_loop(self) -> None:
+        while not self._stop.wait(self.commit_interval):
+            try:
+                self.flush()
+            except BaseException as error:   # disk full, file removed: report on next call
+                log.error("take store %s: commit failed: %s", self.path, error)
+                self._error = error
+                return
+
+    # -- end --------------------------------------------------------------------------------
+    def close(self, *, complete: bool = True) -> None:
+        """Commit what is left, mark the file complete, fold the WAL back into the file (so a
+        finished take is a single self-contained file) and close it."""
+        if self._closed:
+            return
+        self._stop.set()
+        self._flusher.join()
+        try:
+            self.flush()
+            if complete:
+                self._meta("complete", True)
+        finally:
+            self._closed = True
+            with self._db_lock:
+                try:
+                    self._db.execute("PRAGMA wal_checkpoint(TRUNCATE)")
+                    self._db.execute("PRAGMA journal_mode=DELETE")
+                finally:
+                    self._db.close()
+        if self._error is not None:
+            raise OSError(f"take store {self.path}: a background commit failed: "
+                          f"{self._error}") from self._error
+
+    def __enter__(self) -> "StoreWriter":
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        self.close(complete=exc_type is None)
+
+    def _stream(self, name: str) -> tuple[int, int]:
+        self._check_open()
+        try:
+            return self._streams[name]
+        except KeyError:
+            raise KeyError(f"no stream {name!r} in {self.path}; add_stream() it first "
+                           f"(streams: {', '.join(self._streams) or 'none'})") from None
+
+    def _check_open(self) -> None:
+        if self._closed:
+            raise ValueError(f"take store {self.path} is closed")
+        if self._error is not None:
+            raise OSError(f"take store {self.path}: a background commit failed: "
+                          f"{self._error}") from self._error
+
+
+def remove_store_file(path: str | os.PathLike) -> None:
+    """Delete a store file with its WAL and shared-memory companions."""
+    path = Path(path)
+    for companion in (path, Path(f"{path}-wal"), Path(f"{path}-shm")):
+        try:
+            companion.unlink()
+        except FileNotFoundError:
+            pass
+
+
+# ------------------------------------------------------------------------------------------
+# reading
+
+
+def _describe_start(path: Path) -> str:
+    with open(path, "rb") as handle:
+        head = handle.read(16)
+    return repr(head[:16]) if head else "an empty file"
+
+
+def _open_readonly(path: Path) -> sqlite3.Connection:
+    if not path.exists():
+        raise FileNotFoundError(f"take store not found: {path}")
+    if path.is_dir():
+        raise StoreError(f"{path} is a folder, not a take store file", path=path)
+    with open(path, "rb") as handle:
+        head = handle.read(16)
+    if head != _SQLITE_MAGIC:
+        raise StoreError(f"{path} is not a mop take store: not an SQLite file (it starts with "
+                         f"{_describe_start(path)})", path=path)
+    # mode=ro still replays a WAL left by a killed writer (SQLite creates the -shm if needed)
+    uri = f"file:{quote(str(path.resolve()))}?mode=ro"
+    return sqlite3.connect(uri, uri=True, check_same_thread=False)
+
+
+def _tables(db: sqlite3.Connection) -> list[str]:
+    return [row[0] for row in db.execute("SELECT name FROM sqlite_master WHERE type='table'")]
+
+
+def _check_identity(db: sqlite3.Connection, path: Path) -> int:
+    """Return the schema version; raise StoreError for a foreign file or a newer schema."""
+    tables = _tables(db)
+    application_id = db.execute("PRAGMA application_id").fetchone()[0]
+    if "meta" not in tables:
+        raise StoreError(f"{path} is an SQLite database but not a mop take store (application "
+                         f"id {application_id:#x}, tables: {', '.join(tables) or 'none'})",
+                         path=path)
+    row = db.execute("SELECT value FROM meta WHERE key='format'").fetchone()
+    found = json.loads(row[0]) if row else None
+    if found != FORMAT:
+        raise StoreError(f"{path} is an SQLite database but not a mop take store (format "
+                         f"{found!r}, expected {FORMAT!r})", path=path)
+    row = db.execute("SELECT value FROM meta WHERE key='schema_version'").fetchone()
+    version = json.loads(row[0]) if row else None
+    if not isinstance(version, int):
+        raise StoreError(f"{path}: schema_version is {version!r}, expected an integer", path=path)
+    if version > SCHEMA_VERSION:
+        raise StoreError(f"{path} was written with take store schema {version}; this mop reads "
+                         f"up to {SCHEMA_VERSION}: upgrade mop", path=path)
+    return version
+
+
+def _decode_rows(rows: Iterable[tuple], width: int, name: str, problems: list[str] | None
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    times, blobs, bad = [], [], 0
+    expected = 8 * width
+    for seq, t, data in rows:
+        if not isinstance(data, (bytes, bytearray)) or len(data) != expected or t is None \
+                or not math.isfinite(t):
+            bad += 1
+            continue
+        times.append(t)
+        blobs.append(data)
+    if bad:
+        message = f"stream {name!r}: {bad} frame(s) with a wrong size or time skipped"
+        if problems is None:
+            raise StoreError(message)
+        problems.append(message)
+    values = np.frombuffer(b"".join(blobs), dtype="<f8").reshape(len(blobs), width)
+    return np.asarray(times, dtype=np.float64), values.astype(np.float64)
+
+
+def _stream_rows(db, stream_id) -> list[tuple]:
+    return db.execute("SELECT seq, t, data FROM frames WHERE stream=? ORDER BY seq",
+                      (stream_id,)).fetchall()
+
+
+def _read_strict(db: sqlite3.Connection, path: Path) -> StoreContents:
+    version = _check_identity(db, path)
+    meta = {key: json.loads(value) for key, value in db.execute("SELECT key, value FROM meta")}
+    streams = {}
+    for stream_id, name, channels, rate, metadata in db.execute(
+            "SELECT id, name, channels, rate, metadata FROM streams ORDER BY id").fetchall():
+        channels = tuple(json.loads(channels))
+        times, values = _decode_rows(_stream_rows(db, stream_id), len(channels), name, None)
+        streams[name] = Stream(name, channels, float(rate), json.loads(metadata), times, values)
+    attachments = {name: json.loads(content)
+                   for name, content in db.execute("SELECT name, content FROM attachments")}
+    complete = bool(meta.get("complete", False))
+    problems = [] if complete else ["the recording did not finish (interrupted): the take ends "
+                                    "with its last commit"]
+    return StoreContents(path, dict(meta.get("metadata") or {}), streams, attachments,
+                         complete, str(meta.get("created", "")), version, problems)
+
+
+def read_store(path: str | os.PathLike) -> StoreContents:
+    """Read a whole store file. An interrupted recording reads fine (complete=False). A damaged
+    or foreign file raises StoreError with `.salvaged` set to what could be read."""
+    path = Path(path)
+    db = _open_readonly(path)
+    try:
+        return _read_strict(db, path)
+    except StoreError as error:
+        error.salvaged = _salvage_or_none(path)
+        raise
+    except (sqlite3.DatabaseError, json.JSONDecodeError, TypeError, ValueError) as error:
+        salvaged = _salvage_or_none(path)
+        what = "nothing could be salvaged" if salvaged is None else \
+            f"salvaged {_salvage_summary(salvaged)}"
+        raise StoreError(f"{path} is damaged ({type(error).__name__}: {error}); {what}",
+                         path=path, salvaged=salvaged) from None
+    finally:
+        db.close()
+
+
+def _salvage_summary(contents: StoreContents) -> str:
+    parts = [f"{len(s.times)} frames of {name!r}" for name, s in contents.streams.items()]
+    return ", ".join(parts) if parts else "metadata only"
+
+
+def _salvage_or_none(path: Path) -> StoreContents | None:
+    try:
+        return salvage(path)
+    except Exception:   # the file may be beyond reading at all
+        log.debug("salvaging %s failed", path, exc_info=True)
+        return None
+
+
+def salvage(path: str | os.PathLike) -> StoreContents:
+    """Read whatever can be read from a damaged store file, row by row where the file is
+    broken. `problems` says what was lost. Raises StoreError when the file is not SQLite."""
+    path = Path(path)
+    db = _open_readonly(path)
+    problems: list[str] = []
+    try:
+        meta: dict = {}
+        for key in ("format", "schema_version", "created", "complete", "metadata"):
+            try:
+                row = db.execute("SELECT value FROM meta WHERE key=?", (key,)).fetchone()
+                if row is not None:
+                    meta[key] = json.loads(row[0])
+            except (sqlite3.DatabaseError, json.JSONDecodeError) as error:
+                problems.append(f"meta {key!r} unreadable: {error}")
+        if meta.get("format") not in (FORMAT, None):
+            problems.append(f"format is {meta.get('format')!r}, expected {FORMAT!r}")
+        streams = {}
+        try:
+            stream_rows = db.execute(
+                "SELECT id, name, channels, rate, metadata FROM streams ORDER BY id").fetchall()
+        except sqlite3.DatabaseError as error:
+            problems.append(f"stream table unreadable: {error}")
+            stream_rows = []
+        for stream_id, name, channels, rate, metadata in stream_rows:
+            try:
+                channels = tuple(json.loads(channels))
+                metadata = json.loads(metadata)
+            except (json.JSONDecodeError, TypeError) as error:
+                problems.append(f"stream {name!r}: description unreadable: {error}")
+                continue
+            rows, lost = _salvage_rows(db, stream_id)
+            if lost:
+                problems.append(f"stream {name!r}: {lost} unreadable frame range(s) skipped")
+            times, values = _decode_rows(rows, len(channels), name, problems)
+            streams[name] = Stream(name, channels, float(rate), metadata, times, values)
+        attachments = {}
+        try:
+            names = [row[0] for row in db.execute("SELECT name FROM attachments")]
+        except sqlite3.DatabaseError as error:
+            problems.append(f"attachment list unreadable: {error}")
+            names = []
+        for name in names:
+            try:
+                row = db.execute("SELECT content FROM attachments WHERE name=?",
+                                 (name,)).fetchone()
+                attachments[name] = json.loads(row[0])
+            except (sqlite3.DatabaseError, json.JSONDecodeError, TypeError) as error:
+                problems.append(f"attachment {name!r} unreadable: {error}")
+        complete = bool(meta.get("complete", False))
+        if not complete:
+            problems.append("the recording did not finish (interrupted)")
+        version = meta.get("schema_version", 0)
+        return StoreContents(path, dict(meta.get("metadata") or {}), streams, attachments,
+                             complete, str(meta.get("created", "")),
+                             version if isinstance(version, int) else 0, problems)
+    finally:
+        db.close()
+
+
+def _salvage_rows(db: sqlite3.Connection, stream_id: int, chunk: int = 4096
+                  ) -> tuple[list[tuple], int]:
+    """Rows of one stream, reading in seq ranges and splitting the ranges that fail until the
+    broken rows are isolated. Returns (rows, number of unreadable ranges)."""
+    query = "SELECT seq, t, data FROM frames WHERE stream=? AND seq>=? AND seq<? ORDER BY seq"
+    try:
+        top = db.execute("SELECT max(seq) FROM frames WHERE stream=?", (stream_id,)).fetchone()[0]
+        top = -1 if top is None else int(top)
+    except sqlite3.DatabaseError:
+        top = None          # the index itself is broken: walk until the data runs out
+    rows: list[tuple] = []
+    lost = 0
+
+    def read_range(low: int, high: int) -> bool:
+        nonlocal lost
+        try:
+            found = db.execute(query, (stream_id, low, high)).fetchall()
+        except sqlite3.DatabaseError:
+            if high - low <= 1:
+                lost += 1
+                return False
+            middle = (low + high) // 2
+            read_range(low, middle)
+            read_range(middle, high)
+            return True
+        rows.extend(found)
+        return bool(found)
+
+    low = 0
+    empty_runs = 0
+    while True:
+        if top is not None and low > top:
+            break
+        found = read_range(low, low + chunk)
+        low += chunk
+        if top is None:
+            empty_runs = 0 if found else empty_runs + 1
+            if empty_runs >= 4:
+                break
+    rows.sort(key=lambda row: row[0])
+    return rows, lost
+
+
+def read_info(path: str | os.PathLike) -> dict:
+    """A store's metadata and per-stream frame counts and spans, without loading the frames:
+    {"metadata", "complete", "created", "streams": {name: {"channels", "rate", "frames",
+    "start", "end"}}}. Raises StoreError for a damaged or foreign file."""
+    path = Path(path)
+    db = _open_readonly(path)
+    try:
+        _check_identity(db, path)
+        meta = {key: json.loads(value) for key, value in db.execute("SELECT key, value FROM meta")}
+        streams = {}
+        for stream_id, name, channels, rate in db.execute(
+                "SELECT id, name, channels, rate FROM streams ORDER BY id").fetchall():
+            count, start, end = db.execute(
+                "SELECT count(*), min(t), max(t) FROM frames WHERE stream=?",
+                (stream_id,)).fetchone()
+            streams[name] = {"channels": json.loads(channels), "rate": rate, "frames": count,
+                             "start": start, "end": end}
+        attachments = [row[0] for row in db.execute("SELECT name FROM attachments")]
+        return {"metadata": dict(meta.get("metadata") or {}),
+                "complete": bool(meta.get("complete", False)),
+                "created": str(meta.get("created", "")), "streams": streams,
+                "attachments": attachments}
+    except (sqlite3.DatabaseError, json.JSONDecodeError) as error:
+        raise StoreError(f"{path} is damaged ({type(error).__name__}: {error})",
+                         path=path) from None
+    finally:
+        db.close()
+
+
+def read_attachment(path: str | os.PathLike, name: str) -> Any:
+    """One attachment of a store file (KeyError when absent)."""
+    path = Path(path)
+    db = _open_readonly(path)
+    try:
+        _check_identity(db, path)
+        row = db.execute("SELECT content FROM attachments WHERE name=?", (name,)).fetchone()
+    except sqlite3.DatabaseError as error:
+        raise StoreError(f"{path} is damaged ({error})", path=path) from None
+    finally:
+        db.close()
+    if row is None:
+        raise KeyError(f"{path} has no attachment {name!r}")
+    return json.loads(row[0])

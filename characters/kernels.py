@@ -1,0 +1,483 @@
+"""Compiled array kernels of the simulation core (numba, cached compilation).
+
+Pure functions: they read arrays and write into arrays they are given; no allocation inside the
+per-step kernels. Classes in model.py / integrators.py / constraints.py pick which to call; tests
+compare them with plain NumPy references.
+
+Shapes: x, v, f : (N, d) float64 [m, m/s, N]; springs : (M, 2) int32; rest, k, c : (M,) float64.
+"""
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+_JIT = dict(cache=True, nogil=True, fastmath=True, error_model="numpy")
+
+
+# --- forces ---------------------------------------------------------------------------------
+
+@njit(**_JIT)
+def spring_forces(x, v, springs, rest, k, c, out):
+    """Add every spring's elastic + along-spring damping force to out (N, d) [N]."""
+    d = x.shape[1]
+    if d == 3:
+        _spring_forces_3d(x, v, springs, rest, k, c, out)
+        return
+    for s in range(springs.shape[0]):
+        i = springs[s, 0]
+        j = springs[s, 1]
+        length2 = 0.0
+        for a in range(d):
+            e = x[j, a] - x[i, a]
+            length2 += e * e
+        length = np.sqrt(length2)
+        inv = 1.0 / length if length > 0.0 else 0.0
+        rel = 0.0
+        for a in range(d):
+            rel += (v[j, a] - v[i, a]) * (x[j, a] - x[i, a])
+        mag = k[s] * (length - rest[s]) + c[s] * rel * inv
+        for a in range(d):
+            fa = mag * (x[j, a] - x[i, a]) * inv
+            out[i, a] += fa
+            out[j, a] -= fa
+
+
+@njit(**_JIT)
+def _spring_forces_3d(x, v, springs, rest, k, c, out):
+    for s in range(springs.shape[0]):
+        i = springs[s, 0]
+        j = springs[s, 1]
+        ex = x[j, 0] - x[i, 0]
+        ey = x[j, 1] - x[i, 1]
+        ez = x[j, 2] - x[i, 2]
+        length2 = ex * ex + ey * ey + ez * ez
+        inv = 1.0 / np.sqrt(length2) if length2 > 0.0 else 0.0
+        rel = ((v[j, 0] - v[i, 0]) * ex + (v[j, 1] - v[i, 1]) * ey + (v[j, 2] - v[i, 2]) * ez)
+        # k (l - r) / l and c (dv.e) / l^2 : the force is (that) * e
+        mag = (k[s] * (1.0 - rest[s] * inv) + c[s] * rel * inv * inv)
+        fx = mag * ex
+        fy = mag * ey
+        fz = mag * ez
+        out[i, 0] += fx
+        out[i, 1] += fy
+        out[i, 2] += fz
+        out[j, 0] -= fx
+        out[j, 1] -= fy
+        out[j, 2] -= fz
+
+
+@njit(**_JIT)
+def spring_forces_elastic_3d(x, springs, rest, k, out):
+    """Elastic part only (no damping): the force pass measured in benchmarks/sim.py."""
+    for s in range(springs.shape[0]):
+        i = springs[s, 0]
+        j = springs[s, 1]
+        ex = x[j, 0] - x[i, 0]
+        ey = x[j, 1] - x[i, 1]
+        ez = x[j, 2] - x[i, 2]
+        length2 = ex * ex + ey * ey + ez * ez
+        mag = k[s] * (1.0 - rest[s] / np.sqrt(length2)) if length2 > 0.0 else 0.0
+        out[i, 0] += mag * ex
+        out[i, 1] += mag * ey
+        out[i, 2] += mag * ez
+        out[j, 0] -= mag * ex
+        out[j, 1] -= mag * ey
+        out[j, 2] -= mag * ez
+
+
+@njit(**_JIT)
+def spring_energy(x, springs, rest, k):
+    """sum k (l - r)^2 / 2 [J]."""
+    d = x.shape[1]
+    total = 0.0
+    for s in range(springs.shape[0]):
+        i = springs[s, 0]
+        j = springs[s, 1]
+        length2 = 0.0
+        for a in range(d):
+            e = x[j, a] - x[i, a]
+            length2 += e * e
+        stretch = np.sqrt(length2) - rest[s]
+        total += 0.5 * k[s] * stretch * stretch
+    return total
+
+
+@njit(**_JIT)
+def node_forces(x, v, mass, gravity, velocity_damping, target_index, target_position,
+                target_stiffness, target_damping, force_index, force_value, out):
+    """Add gravity, velocity damping, target pulls and external forces to out (N, d) [N].
+
+    target_index (T,) int, target_position (T, d) [m], target_stiffness (T,) [N/m],
+    target_damping (T,) [N s/m]; force_index (F,) int, force_value (F, d) [N].
+    """
+    n, d = x.shape
+    for i in range(n):
+        m = mass[i]
+        for a in range(d):
+            out[i, a] += m * (gravity[a] - velocity_damping * v[i, a])
+    for t in range(target_index.shape[0]):
+        i = target_index[t]
+        for a in range(d):
+            out[i, a] += (target_stiffness[t] * (target_position[t, a] - x[i, a])
+                          - target_damping[t] * v[i, a])
+    for t in range(force_index.shape[0]):
+        i = force_index[t]
+        for a in range(d):
+            out[i, a] += force_value[t, a]
+
+
+# --- explicit update ------------------------------------------------------------------------
+
+@njit(**_JIT)
+def symplectic_update(x, v, f, inverse_mass, dt, retention):
+    """Position Verlet in velocity form: v <- retention v + dt f / m; x <- x + dt v.
+
+    Identical to x_{n+1} = x_n + retention (x_n - x_{n-1}) + dt^2 f / m with v = dx / dt;
+    nodes with inverse_mass 0 (fixed, pinned) keep their position and velocity untouched.
+    """
+    n, d = x.shape
+    for i in range(n):
+        w = inverse_mass[i]
+        if w == 0.0:
+            continue
+        for a in range(d):
+            vi = retention * v[i, a] + dt * w * f[i, a]
+            v[i, a] = vi
+            x[i, a] += dt * vi
+
+
+@njit(**_JIT)
+def all_finite(a):
+    flat = a.ravel()
+    for i in range(flat.shape[0]):
+        if not np.isfinite(flat[i]):
+            return False
+    return True
+
+
+@njit(**_JIT)
+def kinetic_energy(v, mass, inverse_mass):
+    n, d = v.shape
+    total = 0.0
+    for i in range(n):
+        if inverse_mass[i] == 0.0:
+            continue
+        s = 0.0
+        for a in range(d):
+            s += v[i, a] * v[i, a]
+        total += 0.5 * mass[i] * s
+    return total
+
+
+# --- implicit Euler (Baraff-Witkin) -----------------------------------------------------------
+
+@njit(**_JIT)
+def implicit_assemble(x, v, springs, rest, k, c, h, blocks, diag, f, kv):
+    """One pass over springs for the linearised backward-Euler system.
+
+    Writes blocks (M, d, d) = h^2 K_s + h D_s (the off-diagonal block is minus this), adds the
+    same to diag (N, d, d) at both ends, adds spring forces to f (N, d) [N] and K v to kv (N, d)
+    [N/s]. K_s = k (u u^T + max(1 - r/l, 0) (I - u u^T)) is the spring's stiffness block with
+    the transverse term clamped at zero for compressed springs, which keeps the system definite;
+    D_s = c u u^T its damping block.
+    """
+    d = x.shape[1]
+    u = np.empty(d)
+    dv = np.empty(d)
+    for s in range(springs.shape[0]):
+        i = springs[s, 0]
+        j = springs[s, 1]
+        length2 = 0.0
+        for a in range(d):
+            e = x[j, a] - x[i, a]
+            u[a] = e
+            length2 += e * e
+        length = np.sqrt(length2)
+        inv = 1.0 / length if length > 0.0 else 0.0
+        rel = 0.0
+        for a in range(d):
+            u[a] *= inv
+            dv[a] = v[j, a] - v[i, a]
+            rel += dv[a] * u[a]
+        ks = k[s]
+        mag = ks * (length - rest[s]) + c[s] * rel
+        transverse = 1.0 - rest[s] * inv
+        if transverse < 0.0:
+            transverse = 0.0
+        along = h * h * ks + h * c[s]
+        across = h * h * ks * transverse
+        for a in range(d):
+            f[i, a] += mag * u[a]
+            f[j, a] -= mag * u[a]
+            kva = 0.0
+            for b in range(d):
+                uu = u[a] * u[b]
+                block = (along - across) * uu
+                kblock = ks * (uu + transverse * ((1.0 if a == b else 0.0) - uu))
+                if a == b:
+                    block += across
+                blocks[s, a, b] = block
+                diag[i, a, b] += block
+                diag[j, a, b] += block
+                kva += kblock * dv[b]
+            kv[i, a] += kva
+            kv[j, a] -= kva
+
+
+@njit(**_JIT)
+def block_matvec(springs, blocks, diag, z, out):
+    """out = A z for A with diagonal blocks diag (N, d, d), off-diagonal -blocks[s] at (i, j)."""
+    n, d = z.shape
+    for i in range(n):
+        for a in range(d):
+            acc = 0.0
+            for b in range(d):
+                acc += diag[i, a, b] * z[i, b]
+            out[i, a] = acc
+    for s in range(springs.shape[0]):
+        i = springs[s, 0]
+        j = springs[s, 1]
+        for a in range(d):
+            acc_i = 0.0
+            acc_j = 0.0
+            for b in range(d):
+                acc_i += blocks[s, a, b] * z[j, b]
+                acc_j += blocks[s, a, b] * z[i, b]
+            out[i, a] -= acc_i
+            out[j, a] -= acc_j
+
+
+@njit(**_JIT)
+def invert_blocks(diag, free, out):
+    """out[i] = inverse of diag[i] (d <= 3) for free nodes, zero for constrained ones."""
+    n, d = diag.shape[0], diag.shape[1]
+    for i in range(n):
+        if free[i] == 0.0:
+            for a in range(d):
+                for b in range(d):
+                    out[i, a, b] = 0.0
+            continue
+        if d == 2:
+            a00, a01, a10, a11 = diag[i, 0, 0], diag[i, 0, 1], diag[i, 1, 0], diag[i, 1, 1]
+            det = a00 * a11 - a01 * a10
+            out[i, 0, 0] = a11 / det
+            out[i, 0, 1] = -a01 / det
+            out[i, 1, 0] = -a10 / det
+            out[i, 1, 1] = a00 / det
+        else:
+            m = diag[i]
+            c00 = m[1, 1] * m[2, 2] - m[1, 2] * m[2, 1]
+            c01 = m[1, 2] * m[2, 0] - m[1, 0] * m[2, 2]
+            c02 = m[1, 0] * m[2, 1] - m[1, 1] * m[2, 0]
+            det = m[0, 0] * c00 + m[0, 1] * c01 + m[0, 2] * c02
+            inv = 1.0 / det
+            out[i, 0, 0] = c00 * inv
+            out[i, 1, 0] = c01 * inv
+            out[i, 2, 0] = c02 * inv
+            out[i, 0, 1] = (m[0, 2] * m[2, 1] - m[0, 1] * m[2, 2]) * inv
+            out[i, 1, 1] = (m[0, 0] * m[2, 2] - m[0, 2] * m[2, 0]) * inv
+            out[i, 2, 1] = (m[0, 1] * m[2, 0] - m[0, 0] * m[2, 1]) * inv
+            out[i, 0, 2] = (m[0, 1] * m[1, 2] - m[0, 2] * m[1, 1]) * inv
+            out[i, 1, 2] = (m[0, 2] * m[1, 0] - m[0, 0] * m[1, 2]) * inv
+            out[i, 2, 2] = (m[0, 0] * m[1, 1] - m[0, 1] * m[1, 0]) * inv
+
+
+@njit(**_JIT)
+def _apply_blocks(blocks, r, out):
+    n, d = r.shape
+    for i in range(n):
+        for a in range(d):
+            acc = 0.0
+            for b in range(d):
+                acc += blocks[i, a, b] * r[i, b]
+            out[i, a] = acc
+
+
+@njit(**_JIT)
+def _dot(a, b):
+    fa = a.ravel()
+    fb = b.ravel()
+    acc = 0.0
+    for i in range(fa.shape[0]):
+        acc += fa[i] * fb[i]
+    return acc
+
+
+@njit(**_JIT)
+def block_pcg(springs, blocks, diag, diag_inverse, free, rhs, solution, r, z, p, q,
+              tolerance, max_iterations):
+    """Block-Jacobi preconditioned CG on A solution = rhs, over free nodes only.
+
+    Constrained nodes (free[i] == 0) keep their entries of `solution` (prescribed values);
+    their equations are dropped and their columns act through the residual. The initial
+    `solution` is the warm start. Stops when |r|_M^-1 <= tolerance |rhs|_M^-1. Returns the
+    iteration count.
+    """
+    n, d = rhs.shape
+    block_matvec(springs, blocks, diag, solution, q)
+    for i in range(n):
+        for a in range(d):
+            r[i, a] = (rhs[i, a] - q[i, a]) * free[i]
+    _apply_blocks(diag_inverse, r, z)
+    rz = _dot(r, z)
+    for i in range(n):
+        for a in range(d):
+            p[i, a] = z[i, a]
+    # the stopping scale: the preconditioned norm of the right-hand side
+    for i in range(n):
+        for a in range(d):
+            q[i, a] = rhs[i, a] * free[i]
+    _apply_blocks(diag_inverse, q, z)
+    scale = _dot(q, z)
+    for i in range(n):
+        for a in range(d):
+            z[i, a] = p[i, a]
+    target = tolerance * tolerance * scale
+    iteration = 0
+    while iteration < max_iterations and rz > target and rz > 0.0:
+        block_matvec(springs, blocks, diag, p, q)
+        for i in range(n):
+            for a in range(d):
+                q[i, a] *= free[i]
+        pq = _dot(p, q)
+        if pq <= 0.0:
+            break
+        alpha = rz / pq
+        for i in range(n):
+            for a in range(d):
+                solution[i, a] += alpha * p[i, a]
+                r[i, a] -= alpha * q[i, a]
+        _apply_blocks(diag_inverse, r, z)
+        rz_new = _dot(r, z)
+        beta = rz_new / rz
+        rz = rz_new
+        for i in range(n):
+            for a in range(d):
+                p[i, a] = z[i, a] + beta * p[i, a]
+        iteration += 1
+    return iteration
+
+
+@njit(**_JIT)
+def implicit_update(x, v, dv, free, h):
+    """v <- v + dv; x <- x + h v on free nodes (constrained ones are set by the caller)."""
+    n, d = x.shape
+    for i in range(n):
+        if free[i] == 0.0:
+            continue
+        for a in range(d):
+            vi = v[i, a] + dv[i, a]
+            v[i, a] = vi
+            x[i, a] += h * vi
+
+
+# --- projective dynamics (Liu et al. 2013) -------------------------------------------------
+
+@njit(**_JIT)
+def pd_base_rhs(x0, v0, known, springs, k, c, mass, accel, free_nodes, free_id, h,
+                velocity_damping, out):
+    """The part of the global right-hand side that is fixed during one step.
+
+    Row free_id[i] of out belongs to free node i (rows of known nodes are left alone):
+    out = M y + h c_vd M x0 + h C_L x0 + (h^2 L + h C_L) couplings to known nodes,
+    with y = x0 + h v0 + h^2 accel the inertial prediction; known (N, d) holds the end-of-step
+    positions of pinned/fixed nodes (free_id < 0). accel (N, d) [m/s^2] external accelerations.
+    """
+    d = x0.shape[1]
+    for f in range(free_nodes.shape[0]):
+        i = free_nodes[f]
+        row = free_id[i]
+        m = mass[i]
+        for a in range(d):
+            y = x0[i, a] + h * v0[i, a] + h * h * accel[i, a]
+            out[row, a] = m * y + h * velocity_damping * m * x0[i, a]
+    for s in range(springs.shape[0]):
+        i = springs[s, 0]
+        j = springs[s, 1]
+        fi = free_id[i]
+        fj = free_id[j]
+        hc = h * c[s]
+        couple = h * h * k[s] + hc
+        for a in range(d):
+            rel = hc * (x0[i, a] - x0[j, a])
+            if fi >= 0:
+                out[fi, a] += rel
+                if fj < 0:
+                    out[fi, a] += couple * known[j, a]
+            if fj >= 0:
+                out[fj, a] -= rel
+                if fi < 0:
+                    out[fj, a] += couple * known[i, a]
+
+
+@njit(**_JIT)
+def pd_local_rhs(x, springs, weight, base, known_index, known, out):
+    """Local step fused with the right-hand side: out = base + h^2 J d(x), known rows = known.
+
+    d_s = r_s (x_j - x_i) / |x_j - x_i| is spring s projected onto its rest length r_s;
+    weight (M,) = h^2 k_s r_s, so each spring adds weight_s (x_j - x_i) / |x_j - x_i|.
+    """
+    d = x.shape[1]
+    out[...] = base
+    if d == 3:
+        for s in range(springs.shape[0]):
+            i = springs[s, 0]
+            j = springs[s, 1]
+            ex = x[j, 0] - x[i, 0]
+            ey = x[j, 1] - x[i, 1]
+            ez = x[j, 2] - x[i, 2]
+            length2 = ex * ex + ey * ey + ez * ez
+            scale = weight[s] / np.sqrt(length2) if length2 > 0.0 else 0.0
+            out[j, 0] += scale * ex
+            out[j, 1] += scale * ey
+            out[j, 2] += scale * ez
+            out[i, 0] -= scale * ex
+            out[i, 1] -= scale * ey
+            out[i, 2] -= scale * ez
+    else:
+        for s in range(springs.shape[0]):
+            i = springs[s, 0]
+            j = springs[s, 1]
+            length2 = 0.0
+            for a in range(d):
+                e = x[j, a] - x[i, a]
+                length2 += e * e
+            scale = weight[s] / np.sqrt(length2) if length2 > 0.0 else 0.0
+            for a in range(d):
+                pa = scale * (x[j, a] - x[i, a])
+                out[j, a] += pa
+                out[i, a] -= pa
+    for t in range(known_index.shape[0]):
+        i = known_index[t]
+        for a in range(d):
+            out[i, a] = known[i, a]
+
+
+@njit(**_JIT)
+def chebyshev_update(current, solved, previous, omega, gamma):
+    """Chebyshev semi-iterative step (Wang 2015), in place:
+    new = omega (gamma (solved - current) + current - previous) + previous;
+    previous <- current; current <- new."""
+    flat_c = current.ravel()
+    flat_s = solved.ravel()
+    flat_p = previous.ravel()
+    for t in range(flat_c.shape[0]):
+        cur = flat_c[t]
+        prev = flat_p[t]
+        flat_c[t] = omega * (gamma * (flat_s[t] - cur) + cur - prev) + prev
+        flat_p[t] = cur
+
+
+@njit(**_JIT)
+def gravity_work(x, x_ref, mass, inverse_mass, gravity):
+    """Gravity potential of x relative to x_ref: -sum m g . (x - x_ref) [J] over free nodes."""
+    n, d = x.shape
+    total = 0.0
+    for i in range(n):
+        if inverse_mass[i] == 0.0:
+            continue
+        s = 0.0
+        for a in range(d):
+            s += gravity[a] * (x[i, a] - x_ref[i, a])
+        total -= mass[i] * s
+    return total

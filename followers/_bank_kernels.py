@@ -1,0 +1,116 @@
+"""Numba kernel of the bank's per-frame decision: posterior, fit, rejection, hysteresis.
+
+Everything is written into preallocated arrays; ``state (4,) int64`` holds
+``[active action (-1 = none), best action, frames seen, frames since the active action changed]``.
+"""
+from __future__ import annotations
+
+import math
+
+import numba as nb
+import numpy as np
+
+
+@nb.njit(cache=True)
+def bank_decide(frame_loglik, xs, observed, n_obs, background_mean, background_weight,
+                background_log_norm, cap, decay, evidence_cap, lead_cap, fit_floor, recent, fit, fit_weight,
+                posterior, thresholds, enter_margin, leave_margin, switch_posterior, state,
+                moments, main, lengths, progress, variance):
+    """Update the bank's decision after one frame.
+
+    frame_loglik (K,) float: each follower's log-likelihood of this frame
+    xs (D,) float: the cleaned frame; observed (D,) float: 1 or 0 (see ``_kernels.prepare_frame``)
+    n_obs : int: observed channels this frame (0: the frame says nothing, nothing changes)
+    background_mean, background_weight, background_log_norm (D,) float: the background model, one
+        Gaussian over every frame of every template (mean, 1 / variance, -0.5 log(2 pi var));
+        cap: the followers' outlier cap [squared sigmas], applied to it too
+    decay : float in (0, 1): forgetting factor per frame (exp(-1 / memory))
+    evidence_cap, lead_cap : float > 0 [nats]: one frame can count at most ``evidence_cap``
+        against a follower (relative to the frame's best), and no follower trails the leader by
+        more than ``lead_cap`` in ``recent``. An action that was wrong for a long time thus
+        owes little, and a switch is followed as soon as the new action has been clearly better
+        for a few frames, while one odd frame cannot flip the decision.
+    fit_floor : float [nats per channel]: one frame counts at most this low in ``fit``, for
+        the same reason (an action that was badly rejected recovers within a few frames)
+    recent (K,) float in/out: forgetful sum of frame log-likelihoods relative to each frame's
+        best follower, bounded as above
+    fit (K,) float in/out: forgetful mean over frames of the per-channel log-likelihood ratio
+        of each follower against the background model [nats per channel per frame]
+    fit_weight (1,) float in/out: normaliser of that mean
+    posterior (K,) float out: softmax of ``recent``
+    thresholds (K,) float: a follower accepts the input when ``fit >= threshold``
+    enter_margin, leave_margin : float >= 0: hysteresis on the rejection (to become active an
+        action needs fit >= threshold + enter_margin; it stays active while
+        fit >= threshold - leave_margin)
+    switch_posterior : float in (0.5, 1]: posterior another action needs to take over
+    moments (K, 2, 3), main (K,), lengths (K,): the engine's tracks (see ``_kernels``)
+    progress, variance (K,) float out: each follower's main-track progress [0, 1] and variance
+    """
+    K = frame_loglik.shape[0]
+    for k in range(K):
+        scale = 1.0 / (lengths[k] - 1)
+        t = main[k]
+        progress[k] = moments[k, t, 1] * scale
+        variance[k] = moments[k, t, 2] * scale * scale
+    if n_obs > 0:
+        D = observed.shape[0]
+        background = 0.0
+        for d in range(D):
+            if observed[d] > 0.0:
+                diff = xs[d] - background_mean[d]
+                v = background_weight[d] * diff * diff
+                background += background_log_norm[d] - 0.5 * (v if v < cap else cap)
+        fit_weight[0] = decay * fit_weight[0] + 1.0
+        inv_w = 1.0 / fit_weight[0]
+        frame_best = frame_loglik[0]
+        for k in range(1, K):
+            if frame_loglik[k] > frame_best:
+                frame_best = frame_loglik[k]
+        leader = -np.inf
+        for k in range(K):
+            value = frame_loglik[k]
+            evidence = value - frame_best
+            if evidence < -evidence_cap:
+                evidence = -evidence_cap
+            recent[k] = decay * recent[k] + evidence
+            if recent[k] > leader:
+                leader = recent[k]
+            per_channel = (value - background) / n_obs
+            if per_channel < fit_floor:
+                per_channel = fit_floor
+            fit[k] = fit[k] + (per_channel - fit[k]) * inv_w
+        for k in range(K):
+            if recent[k] < leader - lead_cap:
+                recent[k] = leader - lead_cap
+        state[2] += 1
+    best = 0
+    top = recent[0]
+    for k in range(1, K):
+        if recent[k] > top:
+            top = recent[k]
+            best = k
+    total = 0.0
+    for k in range(K):
+        v = math.exp(recent[k] - top)
+        posterior[k] = v
+        total += v
+    for k in range(K):
+        posterior[k] /= total
+    state[1] = best
+    if state[2] == 0:
+        return
+    active = state[0]
+    new = active
+    if active >= 0:
+        if fit[active] < thresholds[active] - leave_margin:
+            new = -1
+        if best != active and posterior[best] >= switch_posterior and \
+                fit[best] >= thresholds[best] + enter_margin:
+            new = best
+    elif fit[best] >= thresholds[best] + enter_margin:
+        new = best
+    if new != active:
+        state[0] = new
+        state[3] = 0
+    else:
+        state[3] += 1

@@ -1,0 +1,148 @@
+"""The parameters and running state of K followers that share one transition model.
+
+Both :class:`followers.Follower` (K = 1) and :class:`followers.FollowerBank` hold one engine;
+the engine owns the preallocated arrays and calls the kernels in ``_kernels``.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from followers import _kernels
+from followers.transitions import TransitionModel
+
+# a clamped value stays this many (template range + sigma) away from the template's range, which
+# keeps every squared distance finite in float64 while still being "far away"
+_CLAMP_SPAN = 1e3
+
+
+def _upsample(values: np.ndarray, factor: int) -> np.ndarray:
+    """(T, D) -> (factor * (T - 1) + 1, D): linear interpolation, original frames kept."""
+    T = values.shape[0]
+    grid = np.arange(factor * (T - 1) + 1) / factor
+    base = np.arange(T, dtype=np.float64)
+    return np.stack([np.interp(grid, base, values[:, d]) for d in range(values.shape[1])],
+                    axis=1)
+
+
+class ForwardEngine:
+    """K windowed forward followers stepped together by one kernel call.
+
+    templates : list of K (T_k, D) float64 arrays (validated)
+    sigmas : list of K (T_k, D) float [input units]: per template frame and channel
+    windows : (K,) int [template frames]
+    (with ``transitions.resolution = R > 1`` the engine holds R (T_k - 1) + 1 states per template)
+    transitions : TransitionModel; cap : float (inf = plain Gaussian) [squared sigmas]
+    prune : float: edge states of a track's support below this mass are dropped (0 = never)
+    """
+
+    def __init__(self, templates: list[np.ndarray], sigmas: list[np.ndarray], windows: np.ndarray,
+                 transitions: TransitionModel, *, cap: float, prune: float):
+        R = transitions.resolution
+        if R > 1:
+            # R states per template frame: the template and its sigma, linearly interpolated
+            templates = [_upsample(t, R) for t in templates]
+            sigmas = [_upsample(s, R) for s in sigmas]
+            windows = np.asarray(windows) * R
+        self.resolution = R
+        self.channels = int(templates[0].shape[1])
+        self.lengths = np.array([t.shape[0] for t in templates], dtype=np.int64)
+        self.offsets = np.zeros(len(templates), dtype=np.int64)
+        self.offsets[1:] = np.cumsum(self.lengths)[:-1]
+        self.templates = np.ascontiguousarray(np.concatenate(templates, axis=0))
+        self.sigmas = np.ascontiguousarray(np.concatenate(sigmas, axis=0), dtype=np.float64)
+        self.weights = 1.0 / self.sigmas ** 2
+        self.state_log_norm = -0.5 * np.log(2.0 * np.pi * self.sigmas ** 2)
+        self.state_log_norm_sum = self.state_log_norm.sum(axis=1)
+        # per template and channel: the mean normaliser, what the bank's fit subtracts
+        self.log_norm = np.stack([self.state_log_norm[o:o + n].mean(axis=0)
+                                  for o, n in zip(self.offsets, self.lengths)])
+        self.half_windows = np.ascontiguousarray(windows, dtype=np.int64)
+        self.transitions = transitions
+        self.cap = float(cap)
+        self.prune = float(prune)
+        self.advance = np.ascontiguousarray(transitions.advance, dtype=np.float64)
+        # advance_tail[m, r] = P(advance >= r): what lands on the absorbing last state
+        self.advance_tail = np.ascontiguousarray(
+            np.cumsum(self.advance[:, ::-1], axis=1)[:, ::-1])
+        self.speed_change = np.ascontiguousarray(transitions.speed_change, dtype=np.float64)
+        self.initial_speed = np.ascontiguousarray(transitions.initial_speed, dtype=np.float64)
+        self.restart = float(transitions.restart)
+        lo = self.templates.min(axis=0)
+        hi = self.templates.max(axis=0)
+        span = _CLAMP_SPAN * (hi - lo + self.sigmas.max(axis=0))
+        self.lower = lo - span
+        self.upper = hi + span
+
+        K = len(templates)
+        S = int(self.lengths.sum())
+        M = transitions.levels
+        self.alpha = np.zeros((2, S, M))
+        self.rowsum = np.zeros((2, S))
+        self.logb = np.zeros(S)
+        self.support = np.zeros((K, 2, 2), dtype=np.int64)
+        self.moments = np.zeros((K, 2, 3))
+        self.main = np.zeros(K, dtype=np.int64)
+        self.fresh = np.ones(K, dtype=np.bool_)
+        self.loglik = np.zeros(K)
+        self.frame_loglik = np.zeros(K)
+        self._xs = np.zeros(self.channels)
+        self._observed = np.zeros(self.channels)
+        self._mix = np.zeros(M)
+        self.reset()
+
+    @property
+    def count(self) -> int:
+        return int(self.lengths.shape[0])
+
+    def reset(self) -> None:
+        self.alpha[:] = 0.0
+        self.rowsum[:] = 0.0
+        self.support[:, :, 0] = 1
+        self.support[:, :, 1] = 0
+        self.moments[:] = 0.0
+        self.main[:] = 0
+        self.fresh[:] = True
+        self.loglik[:] = 0.0
+        self.frame_loglik[:] = 0.0
+
+    def check_frame(self, x) -> np.ndarray:
+        arr = np.ascontiguousarray(x, dtype=np.float64)
+        if arr.shape != (self.channels,):
+            raise ValueError(f"frame must have {self.channels} channel(s) (shape "
+                             f"({self.channels},)), got shape {arr.shape}")
+        return arr
+
+    def step(self, x: np.ndarray) -> int:
+        """Advance all K followers by one frame ``x (D,) float64``; returns observed channels."""
+        return _kernels.bank_step(
+            x, self.lower, self.upper, self.templates, self.offsets, self.lengths,
+            self.half_windows, self.weights, self.state_log_norm, self.state_log_norm_sum,
+            self.cap, self.prune,
+            self.advance, self.advance_tail, self.speed_change, self.initial_speed, self.restart,
+            self.alpha, self.rowsum, self.logb, self.support, self.moments, self.main, self.fresh,
+            self.loglik, self.frame_loglik, self._xs, self._observed, self._mix)
+
+    def run(self, X: np.ndarray):
+        """Step through ``X (N, D) float64``; returns progress, variance, log-likelihood, each
+        (N, K) float64."""
+        N = X.shape[0]
+        K = self.count
+        progress = np.empty((N, K))
+        variance = np.empty((N, K))
+        loglik = np.empty((N, K))
+        _kernels.follow_sequence(
+            X, self.lower, self.upper, self.templates, self.offsets, self.lengths,
+            self.half_windows, self.weights, self.state_log_norm, self.state_log_norm_sum,
+            self.cap, self.prune,
+            self.advance, self.advance_tail, self.speed_change, self.initial_speed, self.restart,
+            self.alpha, self.rowsum, self.logb, self.support, self.moments, self.main, self.fresh,
+            self.loglik, self.frame_loglik, self._xs, self._observed, self._mix,
+            progress, variance, loglik)
+        return progress, variance, loglik
+
+    def progress_of(self, k: int) -> tuple[float, float]:
+        """Main-track progress and variance of template k, in [0, 1] units."""
+        t = self.main[k]
+        scale = 1.0 / (self.lengths[k] - 1)
+        return (float(self.moments[k, t, 1] * scale),
+                float(self.moments[k, t, 2] * scale * scale))

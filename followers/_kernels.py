@@ -1,0 +1,428 @@
+"""Numba kernels of the windowed forward algorithm (pure array functions).
+
+Layout shared by every kernel (K templates stacked, ``S = sum(T_k)`` states in all):
+
+- ``templates (S, D) float64``: template ``k`` is rows ``offsets[k] : offsets[k] + lengths[k]``.
+- ``alpha (2, S, M) float64``: the normalised forward variables of two *tracks* per template,
+  over (state, speed level). The *main* track is the current repetition; the *entry* track is
+  the hypothesis that a new repetition began recently (fed by the restart probability). Their
+  masses sum to 1 after each frame. Rows outside a track's support are always zero.
+- ``rowsum (2, S) float64``: per-state mass of each track (summed over speed levels).
+- ``support (K, 2, 2) int64``: first and last state of each track's support (empty: last < first).
+- ``moments (K, 2, 3) float64``: mass, mean state and state variance of each track.
+- ``main (K,) int64``: which track (0 or 1) is the main one; ``fresh (K,) bool``: no frame yet.
+- ``loglik (K,) float64``: log-likelihood of everything since reset; ``frame_loglik (K,)``: of
+  the last frame alone.
+
+The emission of state ``j`` is ``sum over observed channels d`` of
+``-0.5 * min(w[j, d] * (x[d] - template[j, d])**2, cap) - 0.5 * log(2 pi sigma[j, d]**2)``
+with ``w = 1 / sigma**2`` (sigma per state and channel: ``weights, log_norm (S, D)``); ``cap = inf`` is the plain Gaussian of the paper (equation 1),
+a finite cap bounds what one wild channel can do. Each frame is scaled by the largest emission,
+so nothing under- or overflows however long the run.
+"""
+from __future__ import annotations
+
+import math
+
+import numba as nb
+import numpy as np
+
+_LOG_2PI = math.log(2.0 * math.pi)
+
+
+@nb.njit(cache=True)
+def prepare_frame(x, lower, upper, xs, observed):
+    """Clean one input frame: NaN -> missing, +-inf and huge values clamped into [lower, upper].
+
+    x : (D,) float (any values); lower, upper : (D,) float [input units]
+    xs : (D,) float64 out: clamped values (0 where missing); observed : (D,) float64 out: 1 or 0.
+    Returns the number of observed channels.
+    """
+    count = 0
+    for d in range(x.shape[0]):
+        v = x[d]
+        if v != v:
+            xs[d] = 0.0
+            observed[d] = 0.0
+        else:
+            if v < lower[d]:
+                v = lower[d]
+            elif v > upper[d]:
+                v = upper[d]
+            xs[d] = v
+            observed[d] = 1.0
+            count += 1
+    return count
+
+
+@nb.njit(cache=True, fastmath={"reassoc", "contract"})
+def _emission_rows(templates, weights, log_norm, log_norm_sum, first, last, xs, observed,
+                   all_observed, cap, out):
+    # out[j] = sum over observed d of -0.5 * min(w[j, d] * (x[d] - template[j, d])**2, cap)
+    #          + log_norm[j, d], for rows first..last
+    D = xs.shape[0]
+    for j in range(first, last + 1):
+        acc = 0.0
+        for d in range(D):
+            diff = xs[d] - templates[j, d]
+            v = weights[j, d] * observed[d] * diff * diff
+            acc += v if v < cap else cap
+        if all_observed:
+            norm = log_norm_sum[j]
+        else:
+            norm = 0.0
+            for d in range(D):
+                norm += log_norm[j, d] * observed[d]
+        out[j] = norm - 0.5 * acc
+
+
+@nb.njit(cache=True)
+def _clear_rows(alpha, rowsum, track, first, last):
+    M = alpha.shape[2]
+    for j in range(first, last + 1):
+        rowsum[track, j] = 0.0
+        for m in range(M):
+            alpha[track, j, m] = 0.0
+
+
+@nb.njit(cache=True)
+def _predict_track(alpha, rowsum, track, off, T, lo, hi, keep_scale, advance, advance_tail,
+                   speed_change, mix):
+    """Transition one track in place: truncate to [lo, hi] (state indices within the template),
+    mix speed levels, advance. Returns the last target state. ``keep_scale`` multiplies the mass
+    (1 - restart). ``mix`` is a (M,) scratch."""
+    M = alpha.shape[2]
+    A = advance.shape[1] - 1
+    if M > 1:
+        for i in range(lo, hi + 1):
+            r = off + i
+            for m in range(M):
+                v = alpha[track, r, m] * speed_change[m, 1]
+                if m > 0:
+                    v += alpha[track, r, m - 1] * speed_change[m - 1, 2]
+                if m < M - 1:
+                    v += alpha[track, r, m + 1] * speed_change[m + 1, 0]
+                mix[m] = v
+            for m in range(M):
+                alpha[track, r, m] = mix[m]
+    top = hi + A
+    if top > T - 1:
+        top = T - 1
+    # descending, so every source row (<= target) is read before it is overwritten
+    for j in range(top, lo - 1, -1):
+        r = off + j
+        total = 0.0
+        for m in range(M):
+            s = 0.0
+            if j == T - 1:
+                # absorbing end: every advance that would pass the last state lands on it
+                for i in range(max(lo, T - 1 - A), min(hi, T - 1) + 1):
+                    s += alpha[track, off + i, m] * advance_tail[m, T - 1 - i]
+            else:
+                for a in range(A + 1):
+                    i = j - a
+                    if i < lo:
+                        break
+                    if i <= hi:
+                        s += alpha[track, off + i, m] * advance[m, a]
+            s *= keep_scale
+            alpha[track, r, m] = s
+            total += s
+        rowsum[track, r] = total
+    return top
+
+
+@nb.njit(cache=True)
+def _window(center, half, T):
+    lo = center - half
+    hi = center + half
+    if lo < 0:
+        hi -= lo
+        lo = 0
+    if hi > T - 1:
+        lo -= hi - (T - 1)
+        hi = T - 1
+    if lo < 0:
+        lo = 0
+    return lo, hi
+
+
+@nb.njit(cache=True)
+def _moments(rowsum, track, off, first, last):
+    mass = 0.0
+    mean = 0.0
+    for j in range(first, last + 1):
+        v = rowsum[track, off + j]
+        mass += v
+        mean += v * j
+    if mass <= 0.0:
+        return 0.0, 0.0, 0.0
+    mean /= mass
+    var = 0.0
+    for j in range(first, last + 1):
+        dj = j - mean
+        var += rowsum[track, off + j] * dj * dj
+    return mass, mean, var / mass
+
+
+@nb.njit(cache=True)
+def _argmax_row(rowsum, track, off, first, last):
+    best = first
+    best_v = -1.0
+    for j in range(first, last + 1):
+        if rowsum[track, off + j] > best_v:
+            best_v = rowsum[track, off + j]
+            best = j
+    return best
+
+
+@nb.njit(cache=True)
+def template_step(k, templates, offsets, lengths, half_windows, weights, log_norm, log_norm_sum,
+                  xs, observed, n_obs, cap, prune, advance, advance_tail, speed_change,
+                  initial_speed, restart, alpha, rowsum, logb, support, moments, main, fresh,
+                  loglik, frame_loglik, mix):
+    """One frame of the windowed forward algorithm for template ``k`` (see the module docstring
+    for the layout). ``weights (S, D)``: 1 / sigma**2 per state; ``log_norm (S, D)``: -0.5 log(2 pi
+    sigma**2) per state, ``log_norm_sum (S,)`` its sum over channels; ``half_windows (K,)``: window half-width p in states (>= T: full forward);
+    ``prune``: 0, or a mass below which states at the edges of a track's support are dropped
+    (beam pruning; the support then stays inside the window but is often much narrower). ``mix (M,)``: scratch."""
+    off = offsets[k]
+    T = lengths[k]
+    M = alpha.shape[2]
+    A = advance.shape[1] - 1
+    p = half_windows[k]
+    mt = main[k]
+    et = 1 - mt
+    use_entry = restart > 0.0
+
+    if not fresh[k]:
+        if moments[k, 0, 0] + moments[k, 1, 0] <= 0.0:
+            fresh[k] = True  # nothing left anywhere (cannot happen with finite input): start over
+
+    if fresh[k]:
+        for t in range(2):
+            if support[k, t, 1] >= support[k, t, 0]:
+                _clear_rows(alpha, rowsum, t, off + support[k, t, 0], off + support[k, t, 1])
+            support[k, t, 0] = 1
+            support[k, t, 1] = 0
+        mt = 0
+        et = 1
+        main[k] = 0
+        total = 0.0
+        for m in range(M):
+            alpha[mt, off, m] = initial_speed[m]
+            total += initial_speed[m]
+        rowsum[mt, off] = total
+        support[k, mt, 0] = 0
+        support[k, mt, 1] = 0
+        fresh[k] = False
+    else:
+        keep = 1.0 - restart
+        for t in range(2):
+            first = support[k, t, 0]
+            last = support[k, t, 1]
+            if last < first:
+                continue
+            if t == mt:
+                half = p
+                lo, hi = _window(int(math.floor(moments[k, t, 1] + 0.5)), half, T)
+                kept_lo = max(lo, first)
+                kept_hi = min(hi, last)
+                kept = 0.0
+                for j in range(kept_lo, kept_hi + 1):
+                    kept += rowsum[t, off + j]
+                if kept <= 0.0:
+                    # mass on both sides of an empty middle: centre on the mode instead
+                    mode = _argmax_row(rowsum, t, off, first, last)
+                    lo, hi = _window(mode, half, T)
+                    kept_lo = max(lo, first)
+                    kept_hi = min(hi, last)
+            else:
+                # the entry track only holds repetitions that began recently: eq. 7's first case
+                lo, hi = _window(0, p, T)
+                kept_lo = first
+                kept_hi = min(hi, last)
+            if first < kept_lo:
+                _clear_rows(alpha, rowsum, t, off + first, off + kept_lo - 1)
+            if last > kept_hi:
+                _clear_rows(alpha, rowsum, t, off + kept_hi + 1, off + last)
+            if kept_hi < kept_lo:
+                support[k, t, 0] = 1
+                support[k, t, 1] = 0
+                continue
+            top = _predict_track(alpha, rowsum, t, off, T, kept_lo, kept_hi, keep, advance,
+                                 advance_tail, speed_change, mix)
+            support[k, t, 0] = kept_lo
+            support[k, t, 1] = top
+        if use_entry:
+            # a new repetition starts at the first state (mass before this frame was 1)
+            total = 0.0
+            for m in range(M):
+                v = restart * initial_speed[m]
+                alpha[et, off, m] += v
+                total += v
+            rowsum[et, off] += total
+            if support[k, et, 1] < support[k, et, 0]:
+                support[k, et, 1] = 0
+            support[k, et, 0] = 0
+
+    # ---- emission over the union of both supports -------------------------------------------
+    m_first = support[k, mt, 0]
+    m_last = support[k, mt, 1]
+    e_first = support[k, et, 0]
+    e_last = support[k, et, 1]
+    has_main = m_last >= m_first
+    has_entry = e_last >= e_first
+    shift = 0.0
+    if n_obs > 0:
+        all_observed = n_obs == xs.shape[0]
+        if has_main:
+            _emission_rows(templates, weights, log_norm, log_norm_sum, off + m_first,
+                           off + m_last, xs, observed, all_observed, cap, logb)
+        if has_entry:
+            # only the rows the main track did not already cover
+            if not has_main or e_last < m_first or e_first > m_last:
+                _emission_rows(templates, weights, log_norm, log_norm_sum, off + e_first,
+                               off + e_last, xs, observed, all_observed, cap, logb)
+            else:
+                if e_first < m_first:
+                    _emission_rows(templates, weights, log_norm, log_norm_sum, off + e_first,
+                                   off + m_first - 1, xs, observed, all_observed, cap, logb)
+                if e_last > m_last:
+                    _emission_rows(templates, weights, log_norm, log_norm_sum, off + m_last + 1,
+                                   off + e_last, xs, observed, all_observed, cap, logb)
+        shift = -np.inf
+        for t in range(2):
+            first = support[k, t, 0]
+            last = support[k, t, 1]
+            for j in range(first, last + 1):
+                if rowsum[t, off + j] > 0.0 and logb[off + j] > shift:
+                    shift = logb[off + j]
+        if shift == -np.inf:
+            shift = 0.0
+        c = 0.0
+        for t in range(2):
+            for j in range(support[k, t, 0], support[k, t, 1] + 1):
+                c += rowsum[t, off + j] * math.exp(logb[off + j] - shift)
+        if not c > 1e-280:
+            # the rows with mass all sit far below the best row: rescale by the best product
+            best = -np.inf
+            for t in range(2):
+                for j in range(support[k, t, 0], support[k, t, 1] + 1):
+                    v = rowsum[t, off + j]
+                    if v > 0.0:
+                        lv = math.log(v) + logb[off + j]
+                        if lv > best:
+                            best = lv
+            shift = best
+        for t in range(2):
+            for j in range(support[k, t, 0], support[k, t, 1] + 1):
+                r = off + j
+                e = math.exp(logb[r] - shift)
+                rowsum[t, r] *= e
+                for m in range(M):
+                    alpha[t, r, m] *= e
+    c = 0.0
+    for t in range(2):
+        for j in range(support[k, t, 0], support[k, t, 1] + 1):
+            c += rowsum[t, off + j]
+    if not (c > 0.0 and c < np.inf):
+        # unreachable with clamped input; keep the output finite and start over next frame
+        frame_loglik[k] = -1e300
+        loglik[k] = max(loglik[k] - 1e300, -1e308)
+        fresh[k] = True
+        moments[k, 0, 0] = 0.0
+        moments[k, 1, 0] = 0.0
+        return
+    inv = 1.0 / c
+    for t in range(2):
+        for j in range(support[k, t, 0], support[k, t, 1] + 1):
+            r = off + j
+            rowsum[t, r] *= inv
+            for m in range(M):
+                alpha[t, r, m] *= inv
+    step_ll = math.log(c) + shift
+    frame_loglik[k] = step_ll
+    total_ll = loglik[k] + step_ll
+    loglik[k] = total_ll if total_ll > -1e308 else -1e308
+    if prune > 0.0:
+        # beam pruning: edge states holding almost nothing cost work and change nothing
+        for t in range(2):
+            first = support[k, t, 0]
+            last = support[k, t, 1]
+            while first <= last and rowsum[t, off + first] < prune:
+                for m in range(M):
+                    alpha[t, off + first, m] = 0.0
+                rowsum[t, off + first] = 0.0
+                first += 1
+            while last >= first and rowsum[t, off + last] < prune:
+                for m in range(M):
+                    alpha[t, off + last, m] = 0.0
+                rowsum[t, off + last] = 0.0
+                last -= 1
+            support[k, t, 0] = first
+            support[k, t, 1] = last
+            if last < first:
+                support[k, t, 0] = 1
+                support[k, t, 1] = 0
+    for t in range(2):
+        mass, mean, var = _moments(rowsum, t, off, support[k, t, 0], support[k, t, 1])
+        moments[k, t, 0] = mass
+        moments[k, t, 1] = mean
+        moments[k, t, 2] = var
+    if moments[k, et, 0] > moments[k, mt, 0]:
+        # the new repetition explains the input better: it becomes the current one
+        if support[k, mt, 1] >= support[k, mt, 0]:
+            _clear_rows(alpha, rowsum, mt, off + support[k, mt, 0], off + support[k, mt, 1])
+        support[k, mt, 0] = 1
+        support[k, mt, 1] = 0
+        mass = moments[k, et, 0]
+        inv = 1.0 / mass
+        for j in range(support[k, et, 0], support[k, et, 1] + 1):
+            r = off + j
+            rowsum[et, r] *= inv
+            for m in range(M):
+                alpha[et, r, m] *= inv
+        moments[k, et, 0] = 1.0
+        moments[k, mt, 0] = 0.0
+        moments[k, mt, 1] = 0.0
+        moments[k, mt, 2] = 0.0
+        main[k] = et
+
+
+@nb.njit(cache=True)
+def bank_step(x, lower, upper, templates, offsets, lengths, half_windows, weights, log_norm,
+              log_norm_sum, cap, prune, advance, advance_tail, speed_change, initial_speed,
+              restart, alpha, rowsum, logb, support, moments, main, fresh, loglik, frame_loglik,
+              xs, observed, mix):
+    """One frame for all K templates. ``x (D,)`` is the raw input frame. Returns the number of
+    observed channels."""
+    n_obs = prepare_frame(x, lower, upper, xs, observed)
+    for k in range(offsets.shape[0]):
+        template_step(k, templates, offsets, lengths, half_windows, weights, log_norm,
+                      log_norm_sum, xs, observed, n_obs, cap, prune, advance, advance_tail,
+                      speed_change, initial_speed, restart, alpha, rowsum, logb, support, moments,
+                      main, fresh, loglik, frame_loglik, mix)
+    return n_obs
+
+
+@nb.njit(cache=True)
+def follow_sequence(X, lower, upper, templates, offsets, lengths, half_windows, weights, log_norm,
+                    log_norm_sum, cap, prune, advance, advance_tail, speed_change, initial_speed,
+                    restart, alpha, rowsum, logb, support, moments, main, fresh, loglik,
+                    frame_loglik, xs, observed, mix, out_progress, out_variance, out_loglik):
+    """Run ``bank_step`` over the rows of ``X (N, D)``; write each template's main-track
+    progress and variance (in [0, 1] units) and cumulative log-likelihood into
+    ``out_* (N, K)``."""
+    K = offsets.shape[0]
+    for n in range(X.shape[0]):
+        bank_step(X[n], lower, upper, templates, offsets, lengths, half_windows, weights,
+                  log_norm, log_norm_sum, cap, prune, advance, advance_tail, speed_change,
+                  initial_speed, restart, alpha, rowsum, logb, support, moments, main, fresh,
+                  loglik, frame_loglik, xs, observed, mix)
+        for k in range(K):
+            scale = 1.0 / (lengths[k] - 1)
+            t = main[k]
+            out_progress[n, k] = moments[k, t, 1] * scale
+            out_variance[n, k] = moments[k, t, 2] * scale * scale
+            out_loglik[n, k] = loglik[k]

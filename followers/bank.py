@@ -1,0 +1,328 @@
+"""The followers of one performer's recorded actions, stepped together."""
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+
+import numpy as np
+
+from followers import _bank_kernels
+from followers._engine import ForwardEngine
+from followers.defaults import as_sigma, as_template, as_window, default_sigma, default_window
+from followers.follower import PRUNE_MASS, resolve_cap, resolve_transitions
+
+# rejection: a follower accepts the input while it explains the recent frames better than the
+# background model by this many nats per channel per frame, give or take the hysteresis
+DEFAULT_REJECT_MARGIN = 0.0
+REJECT_HYSTERESIS = 0.1
+DEFAULT_MEMORY = 10.0
+# the posterior's evidence is bounded (see _bank_kernels.bank_decide): one frame counts at most
+# EVIDENCE_CAP nats against an action, and no action trails the leader by more than LEAD_CAP
+EVIDENCE_CAP = 3.0
+LEAD_CAP = 8.0
+FIT_FLOOR = -1.0
+
+
+class BankOutput:
+    """What a bank says after one frame. **The bank reuses one instance**: its fields change at
+    the next ``step``; call :meth:`copy` to keep a snapshot.
+
+    action : str | None: the action being performed (None: nothing recorded explains the input)
+    index : int: position of ``action`` in ``bank.actions`` (-1 for None)
+    best : str: the most probable action, even when rejected
+    progress : float in [0, 1]: progress of ``action`` (of ``best`` when action is None)
+    variance : float >= 0: variance of that progress [progress units squared]
+    log_likelihood : float: that follower's log-likelihood since reset
+    fit : float: that follower's recent log-likelihood ratio against the background model [nats
+        per channel per frame]; the follower accepts the input when ``fit >= threshold``
+    threshold : float: that follower's rejection threshold
+    posterior : dict[str, float]: probability of each action from recent log-likelihood
+        (built on access from ``bank.posteriors``)
+    log_likelihoods : dict[str, float]: every follower's log-likelihood since reset
+    """
+
+    __slots__ = ("_bank", "action", "index", "best", "progress", "variance", "log_likelihood",
+                 "fit", "threshold", "_frozen")
+
+    def __init__(self, bank):
+        self._bank = bank
+        self._frozen = None
+        self.action = None
+        self.index = -1
+        self.best = bank.actions[0]
+        self.progress = 0.0
+        self.variance = 0.0
+        self.log_likelihood = 0.0
+        self.fit = 0.0
+        self.threshold = 0.0
+
+    @property
+    def posterior(self) -> dict[str, float]:
+        if self._frozen is not None:
+            return dict(self._frozen[0])
+        return dict(zip(self._bank.actions, self._bank.posteriors.tolist()))
+
+    @property
+    def log_likelihoods(self) -> dict[str, float]:
+        if self._frozen is not None:
+            return dict(self._frozen[1])
+        return dict(zip(self._bank.actions, self._bank.log_likelihoods.tolist()))
+
+    def copy(self) -> "BankOutput":
+        """A snapshot that later steps do not change."""
+        other = BankOutput(self._bank)
+        for name in ("action", "index", "best", "progress", "variance", "log_likelihood", "fit",
+                     "threshold"):
+            setattr(other, name, getattr(self, name))
+        other._frozen = (self.posterior, self.log_likelihoods)
+        return other
+
+    def __repr__(self) -> str:
+        return (f"BankOutput(action={self.action!r}, progress={self.progress:.3f}, "
+                f"variance={self.variance:.2e}, best={self.best!r}, fit={self.fit:.2f}, "
+                f"threshold={self.threshold:.2f})")
+
+
+class FollowerBank:
+    """Recognises which of several recorded actions a performer is doing, and how far along.
+
+    Parameters
+    ----------
+    templates : {name: (T_k, D) float} (or a sequence of (name, template) pairs): one template per
+        action, all with the same D channels [input units].
+    sigma : float or (D,) float for every action, or {name: float, (D,) or (T_k, D)}, optional
+        [input units]: emission standard deviation. Default: estimated per template with the
+        base level from all templates together (``followers.defaults``), so every follower
+        measures distance the same way and their likelihoods compare fairly.
+    window : int, optional: window half-width p [states] for all followers. Default: per
+        template, ``followers.defaults.default_window``.
+    transitions : as for :class:`followers.Follower` (default ``"speed"``).
+    memory : float > 0 [frames]: time constant of the recent log-likelihood behind the posterior
+        and the rejection (default 10 frames: 0.4 s at 25 fps, 0.17 s at 60 fps).
+    reject_margin : float [nats per channel per frame]: the rejection threshold. The templates
+        themselves define a *background model*: one Gaussian over all their frames ("some pose
+        of this performer"). A follower accepts the input while its recent log-likelihood beats
+        the background's by more than ``reject_margin`` per channel and frame (entering needs
+        ``+0.1`` more, leaving ``0.1`` less: hysteresis); ``-inf`` never rejects. Default 0.
+    switch_posterior : float in [0.5, 1]: posterior another action needs to take over the active
+        one (hysteresis; default 0.9).
+    outlier_sigmas : as for :class:`followers.Follower`.
+
+    The whole bank is one kernel call per frame (all templates stacked in one array).
+    """
+
+    def __init__(self, templates, *, sigma=None, window=None, transitions="speed",
+                 memory: float = DEFAULT_MEMORY, reject_margin: float = DEFAULT_REJECT_MARGIN,
+                 switch_posterior: float = 0.9, outlier_sigmas=None):
+        items = list(templates.items()) if isinstance(templates, Mapping) else list(templates)
+        if not items:
+            raise ValueError("a FollowerBank needs at least one template, got none")
+        names = []
+        arrays = []
+        for entry in items:
+            if not (isinstance(entry, tuple) and len(entry) == 2):
+                raise TypeError("templates must be a mapping {name: (T, D) array} or a sequence of "
+                                f"(name, array) pairs, got an item {type(entry).__name__}")
+            name, template = entry
+            if not isinstance(name, str):
+                raise TypeError(f"action names must be str, got {name!r}")
+            if name in names:
+                raise ValueError(f"action name {name!r} appears twice")
+            names.append(name)
+            arrays.append(as_template(template, name=f"template {name!r}"))
+        D = arrays[0].shape[1]
+        for name, arr in zip(names, arrays):
+            if arr.shape[1] != D:
+                raise ValueError(f"every template needs the same channels: {names[0]!r} has {D}, "
+                                 f"{name!r} has {arr.shape[1]}")
+        K = len(arrays)
+        model = resolve_transitions(transitions)
+        if sigma is None:
+            sigmas = [default_sigma(a, pooled=arrays) for a in arrays]
+        elif isinstance(sigma, Mapping):
+            unknown = sorted(set(sigma) - set(names))
+            if unknown or len(sigma) != K:
+                raise ValueError(f"a sigma mapping needs one entry per action {names}, got keys "
+                                 f"{sorted(sigma)}")
+            sigmas = [as_sigma(sigma[n], a.shape) for n, a in zip(names, arrays)]
+        else:
+            sigmas = [as_sigma(sigma, a.shape) for a in arrays]
+        if window is None:
+            windows = np.array([default_window(a.shape[0]) for a in arrays])
+        else:
+            windows = np.array([as_window(window, a.shape[0]) for a in arrays])
+        memory = float(memory)
+        if not memory > 0:
+            raise ValueError(f"memory must be > 0 frames, got {memory}")
+        reject_margin = float(reject_margin)
+        if math.isnan(reject_margin) or reject_margin == math.inf:
+            raise ValueError(f"reject_margin must be a number or -inf (never reject), got "
+                             f"{reject_margin}")
+        if not 0.5 <= float(switch_posterior) <= 1.0:
+            raise ValueError(f"switch_posterior must be in [0.5, 1], got {switch_posterior}")
+
+        self._names = tuple(names)
+        self._index = {n: i for i, n in enumerate(names)}
+        self._templates = arrays
+        self._transitions = model
+        self._engine = ForwardEngine(arrays, sigmas, windows, model,
+                                     cap=resolve_cap(outlier_sigmas, model.kind),
+                                     prune=0.0 if model.kind == "mop" else PRUNE_MASS)
+        self.memory = memory
+        self.reject_margin = reject_margin
+        self.switch_posterior = float(switch_posterior)
+        self._decay = math.exp(-1.0 / memory)
+        # the background model: one Gaussian over every frame of every template
+        stacked = np.concatenate(arrays, axis=0)
+        spread = np.maximum(stacked.std(axis=0), 1e-6 * max(1.0, float(np.abs(stacked).max())))
+        self._background_mean = stacked.mean(axis=0)
+        self._background_weight = 1.0 / spread ** 2
+        self._background_log_norm = -0.5 * np.log(2.0 * np.pi * spread ** 2)
+        threshold = reject_margin if math.isfinite(reject_margin) else -1e300
+        self._thresholds = np.full(K, threshold)
+        self._enter_margin = REJECT_HYSTERESIS if math.isfinite(reject_margin) else 0.0
+        self._leave_margin = self._enter_margin
+        self._recent = np.zeros(K)
+        self._fit = np.zeros(K)
+        self._fit_weight = np.zeros(1)
+        self._posterior = np.full(K, 1.0 / K)
+        self._progress = np.zeros(K)
+        self._variance = np.zeros(K)
+        self._state = np.zeros(4, dtype=np.int64)
+        self._out = BankOutput(self)
+        self.reset()
+
+    # ---- description ----------------------------------------------------------------------------
+    @property
+    def actions(self) -> tuple[str, ...]:
+        """Action names, in the order of every per-action array."""
+        return self._names
+
+    @property
+    def channels(self) -> int:
+        return self._engine.channels
+
+    @property
+    def lengths(self) -> np.ndarray:
+        """(K,) int: template lengths [frames]."""
+        return self._engine.lengths.copy()
+
+    def sigma(self, action: str) -> np.ndarray:
+        """(T, D) float [input units]: the sigma of one action's follower."""
+        k = self._index[action]
+        off = int(self._engine.offsets[k])
+        return self._engine.sigmas[off:off + int(self._engine.lengths[k])].copy()
+
+    @property
+    def thresholds(self) -> np.ndarray:
+        """(K,) float: rejection thresholds on ``fits``."""
+        return self._thresholds.copy()
+
+    def template(self, action: str) -> np.ndarray:
+        return self._templates[self._index[action]].copy()
+
+    # ---- live per-action arrays (updated in place by every step; copy to keep) -----------------
+    @property
+    def posteriors(self) -> np.ndarray:
+        """(K,) float: posterior over actions after the last frame."""
+        return self._posterior
+
+    @property
+    def progresses(self) -> np.ndarray:
+        """(K,) float in [0, 1]: every follower's progress after the last frame."""
+        return self._progress
+
+    @property
+    def variances(self) -> np.ndarray:
+        """(K,) float: every follower's progress variance [progress units squared]."""
+        return self._variance
+
+    @property
+    def log_likelihoods(self) -> np.ndarray:
+        """(K,) float: every follower's log-likelihood since reset."""
+        return self._engine.loglik
+
+    @property
+    def recent_log_likelihoods(self) -> np.ndarray:
+        """(K,) float: forgetful sum of recent frame log-likelihoods (time constant ``memory``)."""
+        return self._recent
+
+    @property
+    def fits(self) -> np.ndarray:
+        """(K,) float: recent log-likelihood ratio of each follower against the background model
+        [nats per channel per frame]."""
+        return self._fit
+
+    # ---- running --------------------------------------------------------------------------------
+    def reset(self) -> None:
+        """Forget everything: the next frame is the first of a performance."""
+        self._engine.reset()
+        K = len(self._names)
+        self._recent[:] = 0.0
+        self._fit[:] = 0.0
+        self._fit_weight[:] = 0.0
+        self._posterior[:] = 1.0 / K
+        self._progress[:] = 0.0
+        self._variance[:] = 0.0
+        self._state[:] = (-1, 0, 0, 0)
+        self._publish()
+
+    def step(self, x) -> BankOutput:
+        """Follow one frame ``x (D,) float`` (NaN = missing channel) with every follower.
+
+        Returns the bank's :class:`BankOutput`, **the same object every call** (fields updated
+        in place; ``.copy()`` keeps a snapshot). No array is allocated when ``x`` is already a
+        float64 array."""
+        engine = self._engine
+        frame = engine.check_frame(x)
+        n_obs = engine.step(frame)
+        _bank_kernels.bank_decide(
+            engine.frame_loglik, engine._xs, engine._observed, n_obs, self._background_mean,
+            self._background_weight, self._background_log_norm, engine.cap, self._decay,
+            EVIDENCE_CAP, LEAD_CAP, FIT_FLOOR, self._recent, self._fit, self._fit_weight, self._posterior, self._thresholds,
+            self._enter_margin, self._leave_margin, self.switch_posterior, self._state,
+            engine.moments, engine.main, engine.lengths, self._progress, self._variance)
+        self._publish()
+        return self._out
+
+    def _publish(self) -> None:
+        engine = self._engine
+        out = self._out
+        active = int(self._state[0])
+        shown = active if active >= 0 else int(self._state[1])
+        out.action = self._names[active] if active >= 0 else None
+        out.index = active
+        out.best = self._names[int(self._state[1])]
+        out.progress = float(self._progress[shown])
+        out.variance = float(self._variance[shown])
+        out.log_likelihood = float(engine.loglik[shown])
+        out.fit = float(self._fit[shown])
+        out.threshold = float(self._thresholds[shown])
+
+    def follow(self, X) -> dict[str, np.ndarray]:
+        """Step through ``X (N, D)`` from a fresh start; returns arrays for plotting:
+        ``action`` (N,) int (-1: none), ``progress``/``variance`` (N,) of the shown action,
+        ``progresses``, ``posteriors``, ``log_likelihoods``, ``fits`` each (N, K)."""
+        arr = np.asarray(X, dtype=np.float64)
+        if arr.ndim != 2 or arr.shape[1] != self.channels:
+            raise ValueError(f"X must be (N, {self.channels}), got shape {arr.shape}")
+        N, K = arr.shape[0], len(self._names)
+        result = {"action": np.empty(N, dtype=np.int64), "progress": np.empty(N),
+                  "variance": np.empty(N), "progresses": np.empty((N, K)),
+                  "posteriors": np.empty((N, K)), "log_likelihoods": np.empty((N, K)),
+                  "fits": np.empty((N, K))}
+        self.reset()
+        for n in range(N):
+            out = self.step(arr[n])
+            result["action"][n] = out.index
+            result["progress"][n] = out.progress
+            result["variance"][n] = out.variance
+            result["progresses"][n] = self._progress
+            result["posteriors"][n] = self._posterior
+            result["log_likelihoods"][n] = self._engine.loglik
+            result["fits"][n] = self._fit
+        return result
+
+    def __repr__(self) -> str:
+        return (f"FollowerBank({len(self._names)} actions: {', '.join(self._names)}; "
+                f"D={self.channels}, transitions={self._transitions.kind!r})")

@@ -1,0 +1,113 @@
+"""Defaults estimated from the templates themselves, and template validation.
+
+- **sigma** (per channel): ``SIGMA_FRACTION`` times the channel's standard deviation over all
+  frames of the template(s), floored at ``SIGMA_FLOOR`` times the root-mean-square of those
+  deviations (so a channel that never moves in the demonstration does not make every other
+  value impossible), and 1.0 when the template does not move at all. A performer repeating a
+  demonstration rarely differs from it by less than a quarter of the channel's range of motion;
+  a much smaller sigma makes the follower brittle, a much larger one blurs positions.
+- **window** (half-width p, in states): ``ceil(WINDOW_FRACTION * T)``, at least
+  ``WINDOW_MIN`` and at most T. The posterior of a follower that is on track is a few states
+  wide; p only has to hold it through ambiguous stretches (a held pose), which in
+  demonstrations of gestures rarely exceed a fifth of the template. The default ``"speed"``
+  transitions also shrink the window to the posterior mean +- 6 standard deviations while the
+  follower is confident, which is what makes large banks cheap.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+SIGMA_FRACTION = 0.25
+SIGMA_FLOOR = 0.05
+LOCAL_FRACTION = 0.05
+LOCAL_WEIGHT = 0.0
+WINDOW_FRACTION = 0.2
+WINDOW_MIN = 8
+
+
+def as_template(template, *, name: str = "template") -> np.ndarray:
+    """Validate a template and return it as a C-contiguous ``(T, D) float64`` array.
+
+    A 1-D array is one channel. Raises ValueError for fewer than 2 frames, no channel, or
+    non-finite values (fill gaps first, e.g. with :func:`followers.fill_gaps`)."""
+    arr = np.asarray(template)
+    if arr.dtype == object or not np.issubdtype(arr.dtype, np.number):
+        raise TypeError(f"{name} must be a numeric array, got dtype {arr.dtype}")
+    if arr.ndim == 1:
+        arr = arr[:, None]
+    if arr.ndim != 2:
+        raise ValueError(f"{name} must be (T, D) (frames x channels), got shape {arr.shape}")
+    if arr.shape[0] < 2 or arr.shape[1] < 1:
+        raise ValueError(f"{name} needs at least 2 frames and 1 channel, got shape {arr.shape}")
+    arr = np.ascontiguousarray(arr, dtype=np.float64)
+    bad = ~np.isfinite(arr)
+    if bad.any():
+        rows = np.unique(np.nonzero(bad)[0])
+        raise ValueError(f"{name} has non-finite values in {rows.size} frame(s) (first: frame "
+                         f"{rows[0]}); fill the gaps first (followers.fill_gaps)")
+    return arr
+
+
+def local_variance(template: np.ndarray, half: int) -> np.ndarray:
+    """Variance of each channel over frames ``t - half .. t + half`` (clipped at the ends).
+
+    template : (T, D) float. Returns (T, D) float [input units squared]."""
+    T = template.shape[0]
+    c1 = np.vstack([np.zeros((1, template.shape[1])), np.cumsum(template, axis=0)])
+    c2 = np.vstack([np.zeros((1, template.shape[1])), np.cumsum(template ** 2, axis=0)])
+    lo = np.clip(np.arange(T) - half, 0, T)
+    hi = np.clip(np.arange(T) + half + 1, 0, T)
+    n = (hi - lo)[:, None]
+    mean = (c1[hi] - c1[lo]) / n
+    return np.maximum((c2[hi] - c2[lo]) / n - mean ** 2, 0.0)
+
+
+def default_sigma(template: np.ndarray, *, pooled: list[np.ndarray] | None = None) -> np.ndarray:
+    """Per-state, per-channel sigma estimated from a template.
+
+    template : (T, D) float (validated); pooled : optional list of (T_k, D) templates whose
+    channel spreads set the base level (a bank passes all its templates, so every follower
+    measures distance the same way). Returns (T, D) float [input units]."""
+    stacked = np.concatenate(pooled if pooled else [template], axis=0)
+    spread = stacked.std(axis=0)
+    rms = float(np.sqrt(np.mean(spread ** 2)))
+    if rms <= 0.0:
+        return np.ones_like(template)
+    base = SIGMA_FRACTION * np.maximum(spread, SIGMA_FLOOR * rms)
+    var = np.broadcast_to(base ** 2, template.shape).copy()
+    if LOCAL_WEIGHT > 0:
+        half = max(1, int(round(LOCAL_FRACTION * template.shape[0])))
+        var += LOCAL_WEIGHT * local_variance(template, half)
+    return np.sqrt(var)
+
+
+def default_window(length: int) -> int:
+    """Window half-width p [states] for a template of ``length`` frames."""
+    return int(min(length, max(WINDOW_MIN, math.ceil(WINDOW_FRACTION * length))))
+
+
+def as_sigma(sigma, shape: tuple[int, int]) -> np.ndarray:
+    """Validate a user sigma (scalar, (D,) or (T, D)) and return it as (T, D) float64."""
+    T, D = shape
+    arr = np.asarray(sigma, dtype=np.float64)
+    if arr.ndim == 0:
+        arr = np.full(D, float(arr))
+    if arr.shape == (D,):
+        arr = np.broadcast_to(arr, (T, D))
+    if arr.shape != (T, D):
+        raise ValueError(f"sigma must be a scalar, one value per channel ({D},) or one per state "
+                         f"and channel ({T}, {D}); got shape {arr.shape}")
+    if not np.all(np.isfinite(arr)) or np.any(arr <= 0):
+        raise ValueError(f"sigma must be finite and > 0, got min {arr.min()}")
+    return np.ascontiguousarray(arr)
+
+
+def as_window(window, length: int) -> int:
+    """Validate a user window half-width (int >= 1)."""
+    if isinstance(window, bool) or not isinstance(window, (int, np.integer)):
+        raise TypeError(f"window must be an int (half-width in states), got {window!r}")
+    if window < 1:
+        raise ValueError(f"window must be >= 1 state, got {window}")
+    return int(window)

@@ -1,0 +1,161 @@
+"""One action follower: a template turned into a left-to-right HMM, followed frame by frame."""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from followers._engine import ForwardEngine
+from followers.defaults import as_sigma, as_template, as_window, default_sigma, default_window
+from followers.transitions import TransitionModel, transition_model
+
+# outlier cap of the default transition models [sigmas]: one channel further than this from a
+# state costs the same for every state, so a glitching sensor cannot drag the follower around
+DEFAULT_OUTLIER_SIGMAS = 5.0
+# the default models drop states at the edges of the posterior holding less than this mass
+# (beam pruning): a confident follower then touches a few states, not the whole window
+PRUNE_MASS = 1e-8
+
+
+@dataclass(frozen=True, slots=True)
+class FollowerOutput:
+    """What a follower says after one frame.
+
+    progress : float in [0, 1]: expected template position / (T - 1)
+    variance : float >= 0: variance of that position [progress units squared]
+    log_likelihood : float: log-likelihood of everything seen since reset (natural log of a
+        density in the input's units; comparable across templates with the same channels)
+    frame_log_likelihood : float: the last frame's share of ``log_likelihood``
+    """
+
+    progress: float
+    variance: float
+    log_likelihood: float
+    frame_log_likelihood: float
+
+
+@dataclass(frozen=True)
+class FollowerTrace:
+    """A follower's outputs over a sequence: each array (N,) float64, same units as
+    :class:`FollowerOutput`."""
+
+    progress: np.ndarray
+    variance: np.ndarray
+    log_likelihood: np.ndarray
+
+
+def resolve_transitions(transitions) -> TransitionModel:
+    if isinstance(transitions, TransitionModel):
+        return transitions
+    if isinstance(transitions, str):
+        return transition_model(transitions)
+    raise TypeError(f"transitions must be a name ('speed', 'mop', 'skip') or a TransitionModel, "
+                    f"got {type(transitions).__name__}")
+
+
+def resolve_cap(outlier_sigmas, kind: str) -> float:
+    if outlier_sigmas is None:
+        outlier_sigmas = math.inf if kind == "mop" else DEFAULT_OUTLIER_SIGMAS
+    value = float(outlier_sigmas)
+    if not value > 0:
+        raise ValueError(f"outlier_sigmas must be > 0 (inf: plain Gaussian), got {outlier_sigmas}")
+    return value * value
+
+
+class Follower:
+    """Follows a performer through one recorded action (MOP, section 3.2).
+
+    Parameters
+    ----------
+    template : (T, D) float [input units], T >= 2 (a (T,) array is one channel): the action as
+        demonstrated, one HMM state per frame.
+    sigma : float, (D,) or (T, D) float [input units], optional: the Gaussian emission's
+        standard deviation (one shared value as in the paper, one per channel, or one per state
+        and channel). Default: estimated from the template (see ``followers.defaults``).
+    window : int, optional: half-width p of the forward window [states]; ``window >= T`` runs
+        the full forward algorithm. Default: ``followers.defaults.default_window(T)``.
+    transitions : ``"speed"`` (default), ``"mop"``, ``"skip"`` or a
+        :class:`~followers.transitions.TransitionModel`. ``"mop"`` is the paper to the letter;
+        ``"speed"`` follows performers from 0.5x to 2x the demonstration's speed.
+    outlier_sigmas : float, optional: a channel further than this many sigmas from a state counts
+        as this far (inf: plain Gaussian). Default: inf for ``"mop"``, 5 otherwise.
+
+    With ``"mop"`` the window is fixed (equation 7); with the other models, states at the edges
+    of the posterior holding less than ``PRUNE_MASS`` are also dropped, so a confident follower
+    touches a few states rather than the whole window.
+    """
+
+    def __init__(self, template, *, sigma=None, window=None, transitions="speed",
+                 outlier_sigmas=None):
+        tmpl = as_template(template)
+        model = resolve_transitions(transitions)
+        T, D = tmpl.shape
+        self._sigma = default_sigma(tmpl) if sigma is None else as_sigma(sigma, (T, D))
+        self._window = default_window(T) if window is None else as_window(window, T)
+        self._transitions = model
+        self._engine = ForwardEngine(
+            [tmpl], [self._sigma], np.array([self._window]), model,
+            cap=resolve_cap(outlier_sigmas, model.kind),
+            prune=0.0 if model.kind == "mop" else PRUNE_MASS)
+        self._template = tmpl
+        self._template.setflags(write=False)
+
+    # ---- parameters ---------------------------------------------------------------------------
+    @property
+    def template(self) -> np.ndarray:
+        """(T, D) float64, read-only."""
+        return self._template
+
+    @property
+    def sigma(self) -> np.ndarray:
+        """(T, D) float64 [input units]: per state and channel."""
+        return self._sigma.copy()
+
+    @property
+    def window(self) -> int:
+        """Window half-width p [states]."""
+        return self._window
+
+    @property
+    def transitions(self) -> TransitionModel:
+        return self._transitions
+
+    @property
+    def length(self) -> int:
+        return int(self._template.shape[0])
+
+    @property
+    def channels(self) -> int:
+        return int(self._template.shape[1])
+
+    # ---- running --------------------------------------------------------------------------------
+    def reset(self) -> None:
+        """Forget everything seen: the next frame is the first of a performance."""
+        self._engine.reset()
+
+    def step(self, x) -> FollowerOutput:
+        """Follow one frame ``x (D,) float`` (NaN = missing channel; all NaN = no observation)."""
+        engine = self._engine
+        engine.step(engine.check_frame(x))
+        progress, variance = engine.progress_of(0)
+        return FollowerOutput(progress, variance, float(engine.loglik[0]),
+                              float(engine.frame_loglik[0]))
+
+    def follow(self, X, *, reset: bool = True) -> FollowerTrace:
+        """Follow a whole sequence ``X (N, D) float`` (from a fresh start unless ``reset=False``).
+        Returns a :class:`FollowerTrace` of (N,) arrays."""
+        arr = np.asarray(X, dtype=np.float64)
+        if arr.ndim == 1 and self.channels == 1:
+            arr = arr[:, None]
+        if arr.ndim != 2 or arr.shape[1] != self.channels:
+            raise ValueError(f"X must be (N, {self.channels}) (frames x channels), got shape "
+                             f"{arr.shape}")
+        if reset:
+            self.reset()
+        progress, variance, loglik = self._engine.run(np.ascontiguousarray(arr))
+        return FollowerTrace(progress[:, 0], variance[:, 0], loglik[:, 0])
+
+    def __repr__(self) -> str:
+        return (f"Follower(T={self.length}, D={self.channels}, window={self._window}, "
+                f"transitions={self._transitions.kind!r})")

@@ -1,0 +1,197 @@
+"""A follower from several demonstrations of one action: a left-to-right HMM trained with
+Baum–Welch (hmmlearn), keeping the left-to-right topology.
+
+The chain has one state per frame of a typical demonstration and the transitions
+``i -> i, i + 1, i + 2``; every other transition starts at zero, and Baum–Welch never moves a
+zero probability, so training keeps that topology. The initial distribution is fixed on the
+first state. The trained means become the follower's template and the trained per-state
+variances its sigma (never below the single-template default, so three demonstrations that
+happen to agree do not make a brittle follower).
+"""
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+
+import numba as nb
+import numpy as np
+
+from followers.defaults import as_template, default_sigma
+from followers.follower import Follower
+from followers.preprocessing import resample
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class TrainedModel:
+    """The outcome of :func:`train_hmm`.
+
+    means : (S, D) float [input units]; sigma : (S, D) float [input units]
+    transitions : (S, S) float: trained transition matrix (left-to-right)
+    log_likelihoods : (I,) float: total log-likelihood of the demonstrations after each
+        Baum–Welch iteration (non-decreasing up to rounding)
+    hmm : the trained ``hmmlearn.hmm.GaussianHMM``
+    """
+
+    means: np.ndarray
+    sigma: np.ndarray
+    transitions: np.ndarray
+    log_likelihoods: np.ndarray
+    hmm: object
+
+
+def _hmmlearn():
+    try:
+        from hmmlearn import hmm
+    except ImportError as exc:  # pragma: no cover - depends on the environment
+        raise ImportError("training followers needs hmmlearn: pip install 'mop[train]'") from exc
+    return hmm
+
+
+def left_to_right(states: int, *, skips: int = 1) -> np.ndarray:
+    """(S, S) transition matrix: from state i, uniform over i .. i + 1 + skips (clipped at the
+    end; the last state is absorbing)."""
+    matrix = np.zeros((states, states))
+    for i in range(states):
+        last = min(states - 1, i + 1 + skips)
+        matrix[i, i:last + 1] = 1.0 / (last - i + 1)
+    return matrix
+
+
+@nb.njit(cache=True)
+def _dtw_map(reference, other):
+    """For each frame of ``other (N, D)``, the frame of ``reference (S, D)`` it aligns with
+    under dynamic time warping (squared Euclidean cost, steps (1,0), (0,1), (1,1)).
+    Returns (N,) int64."""
+    S = reference.shape[0]
+    N = other.shape[0]
+    cost = np.full((S + 1, N + 1), np.inf)
+    cost[0, 0] = 0.0
+    for i in range(1, S + 1):
+        for j in range(1, N + 1):
+            c = 0.0
+            for d in range(reference.shape[1]):
+                diff = reference[i - 1, d] - other[j - 1, d]
+                c += diff * diff
+            best = cost[i - 1, j - 1]
+            if cost[i - 1, j] < best:
+                best = cost[i - 1, j]
+            if cost[i, j - 1] < best:
+                best = cost[i, j - 1]
+            cost[i, j] = c + best
+    mapping = np.zeros(N, dtype=np.int64)
+    i = S
+    j = N
+    while i > 0 and j > 0:
+        mapping[j - 1] = i - 1
+        diag = cost[i - 1, j - 1]
+        up = cost[i - 1, j]
+        left = cost[i, j - 1]
+        if diag <= up and diag <= left:
+            i -= 1
+            j -= 1
+        elif up <= left:
+            i -= 1
+        else:
+            j -= 1
+    return mapping
+
+
+def aligned_statistics(demos: list[np.ndarray], states: int) -> tuple[np.ndarray, np.ndarray]:
+    """Per-state mean and variance of the demonstrations after aligning each with dynamic time
+    warping to the demonstration whose length is the median, stretched to ``states`` frames.
+
+    demos : list of (T_i, D) float. Returns means (S, D) and variances (S, D) [input units]."""
+    order = np.argsort([d.shape[0] for d in demos])
+    reference = resample(demos[order[len(order) // 2]], states)
+    total = np.zeros_like(reference)
+    total_sq = np.zeros_like(reference)
+    count = np.zeros(states)
+    for d in demos:
+        mapping = _dtw_map(reference, d)
+        np.add.at(total, mapping, d)
+        np.add.at(total_sq, mapping, d ** 2)
+        np.add.at(count, mapping, 1.0)
+    seen = count > 0
+    means = reference.copy()
+    means[seen] = total[seen] / count[seen, None]
+    var = np.zeros_like(reference)
+    var[seen] = np.maximum(total_sq[seen] / count[seen, None] - means[seen] ** 2, 0.0)
+    return means, var
+
+
+def train_hmm(demonstrations, *, states: int | None = None, iterations: int = 10,
+              skips: int = 1, random_state: int = 0) -> TrainedModel:
+    """Train a left-to-right Gaussian HMM (diagonal covariances) on demonstrations of one action.
+
+    demonstrations : list of (T_i, D) float arrays [input units] (gaps filled; one is allowed).
+    states : int, optional: number of states. Default: the median demonstration length.
+    iterations : int >= 1: Baum–Welch iterations. skips : int >= 0: states a transition may skip.
+    """
+    hmm = _hmmlearn()
+    if isinstance(demonstrations, np.ndarray):
+        demonstrations = [demonstrations]
+    demos = [as_template(d, name=f"demonstration {i}") for i, d in enumerate(demonstrations)]
+    if not demos:
+        raise ValueError("train_hmm needs at least one demonstration, got none")
+    D = demos[0].shape[1]
+    for i, d in enumerate(demos):
+        if d.shape[1] != D:
+            raise ValueError(f"every demonstration needs the same channels: demonstration 0 has "
+                             f"{D}, demonstration {i} has {d.shape[1]}")
+    lengths = np.array([d.shape[0] for d in demos])
+    S = int(np.median(lengths)) if states is None else int(states)
+    if S < 2:
+        raise ValueError(f"states must be >= 2, got {S}")
+    if int(iterations) < 1:
+        raise ValueError(f"iterations must be >= 1, got {iterations}")
+    if int(skips) < 0:
+        raise ValueError(f"skips must be >= 0, got {skips}")
+    shortest = lengths.min()
+    if S > shortest * (2 + skips) - 1:
+        raise ValueError(f"{S} states cannot be crossed in {shortest} frames with {skips} skip(s);"
+                         f" use fewer states or more skips")
+
+    # initial means and spreads: the demonstrations aligned by dynamic time warping to the
+    # median-length one, then averaged per state (Baum-Welch only refines from there)
+    means, var = aligned_statistics(demos, S)
+    pooled = np.concatenate(demos, axis=0).std(axis=0)
+    floor = (0.05 * max(float(np.sqrt(np.mean(pooled ** 2))), 1e-6)) ** 2
+    covars = var + floor
+
+    model = hmm.GaussianHMM(n_components=S, covariance_type="diag", n_iter=int(iterations),
+                            tol=0.0, min_covar=floor, init_params="", params="tmc",
+                            random_state=random_state, implementation="scaling")
+    model.startprob_ = np.eye(S)[0]
+    model.transmat_ = left_to_right(S, skips=int(skips))
+    model.means_ = means
+    model.covars_ = covars
+    hmm_logger = logging.getLogger("hmmlearn.base")
+    level = hmm_logger.level
+    hmm_logger.setLevel(logging.ERROR)  # its "not converging" note is about rounding at tol=0
+    try:
+        model.fit(np.concatenate(demos, axis=0), lengths)
+    finally:
+        hmm_logger.setLevel(level)
+    history = np.array(model.monitor_.history, dtype=np.float64)
+    trained_var = np.diagonal(model.covars_, axis1=1, axis2=2)
+    log.debug("trained %d-state left-to-right HMM on %d demonstrations: log-likelihood %s",
+              S, len(demos), history)
+    return TrainedModel(means=np.ascontiguousarray(model.means_),
+                        sigma=np.sqrt(trained_var), transitions=model.transmat_.copy(),
+                        log_likelihoods=history, hmm=model)
+
+
+def train_follower(demonstrations, *, states: int | None = None, iterations: int = 10,
+                   window=None, transitions="speed", outlier_sigmas=None) -> Follower:
+    """A :class:`~followers.Follower` from several demonstrations of one action.
+
+    The template is the trained HMM's means (S, D) and sigma its per-state standard deviations,
+    floored at ``followers.defaults.default_sigma`` of that template. The follower then uses its
+    own ``transitions`` (default ``"speed"``), not the trained ones: those describe the tempo of
+    the demonstrations, while a performer is followed from 0.5x to 2x of it."""
+    trained = train_hmm(demonstrations, states=states, iterations=iterations)
+    sigma = np.maximum(trained.sigma, default_sigma(trained.means))
+    return Follower(trained.means, sigma=sigma, window=window, transitions=transitions,
+                    outlier_sigmas=outlier_sigmas)

@@ -1,0 +1,141 @@
+"""`mop perform SESSION`: run a session live (or replayed from takes) to its outputs."""
+from __future__ import annotations
+
+import argparse
+import signal
+import sys
+import time
+
+
+def register(subparsers) -> None:
+    parser = subparsers.add_parser(
+        "perform", help="perform a session: performers drive characters, live or from takes",
+        description="Run a session file: every performer's input is followed, the recognised "
+                    "actions play their motions on the characters, and the frames go to the "
+                    "outputs. Ctrl-C stops and finalises every output. Send SIGUSR1 to print "
+                    "the timing so far.")
+    parser.add_argument("session", help="the session file (.toml)")
+    parser.add_argument("--replay", nargs="*", metavar="PERFORMER=TAKE", default=None,
+                        help="replay mode: run as fast as possible from takes (deterministic); "
+                             "PERFORMER=TAKE replays that take for that performer instead of "
+                             "their source; without pairs every performer must already be "
+                             "a replay: source")
+    parser.add_argument("--realtime", action="store_true",
+                        help="keep real time even when every performer is replayed")
+    parser.add_argument("--loop", action="store_true",
+                        help="loop replayed takes (a show that runs until Ctrl-C)")
+    parser.add_argument("--duration", type=float, default=None, metavar="SECONDS",
+                        help="stop after this much session time")
+    parser.add_argument("--out", default=None, metavar="PATH",
+                        help="video file (.mp4, .mkv, .gif) or a folder for PNG frames with alpha")
+    parser.add_argument("--png", default=None, metavar="FOLDER",
+                        help="also write a PNG sequence with alpha")
+    parser.add_argument("--preview", type=int, default=None, metavar="PORT",
+                        help="serve the live preview page on this port (0 = any free port)")
+    parser.add_argument("--preview-host", default=None, metavar="HOST",
+                        help="address for the preview page (default 127.0.0.1)")
+    parser.add_argument("--osc-out", default=None, metavar="HOST:PORT",
+                        help="send every character's state as OSC to this address")
+    parser.add_argument("--no-render", action="store_true",
+                        help="follow and simulate only (OSC out, timing), no pictures")
+    parser.add_argument("--quiet", action="store_true", help="no progress lines")
+    parser.set_defaults(func=run)
+
+
+def parse_replay(pairs) -> dict[str, str]:
+    replay = {}
+    for pair in pairs or ():
+        performer, sep, take = pair.partition("=")
+        if not sep or not performer or not take:
+            raise ValueError(f"--replay expects PERFORMER=TAKE, got {pair!r}")
+        replay[performer] = take if take.startswith("replay:") else f"replay:{take}"
+    return replay
+
+
+def perform(config, *, mode, overrides, duration=None, quiet=False, out=sys.stderr,
+            extra_outputs=()):
+    """Build and run a session with Ctrl-C and SIGUSR1 handling; returns (report, interrupted)."""
+    from mop.session.build import build_session
+
+    def say(text):
+        if not quiet:
+            print(text, file=out, flush=True)
+
+    session = build_session(config, mode=mode, overrides=overrides, progress=say,
+                            extra_outputs=extra_outputs)
+    for output in session.outputs:
+        url = getattr(output, "url", None)
+        if url:
+            print(f"preview: {url}", file=out, flush=True)
+
+    interrupted = []
+
+    def on_interrupt(signum, frame):
+        if interrupted:  # a second Ctrl-C: stop at once (outputs are still closed on the way)
+            raise KeyboardInterrupt
+        interrupted.append(signum)
+        session.request_stop()
+
+    def on_report(signum, frame):
+        print(session.report().format(), file=out, flush=True)
+
+    last = [time.monotonic()]
+
+    def progress(current):
+        now = time.monotonic()
+        if not quiet and now - last[0] >= 1.0:
+            last[0] = now
+            states = ", ".join(f"{name} {p['status']}:{p['action'] or 'rest'}"
+                               f"@{p['progress']:.2f}" for name, p in
+                               current.state()["performers"].items())
+            print(f"frame {current.frame_index} t={current.t:.1f}s dropped={current.dropped} "
+                  f"{states}", file=out, flush=True)
+
+    previous_int = signal.signal(signal.SIGINT, on_interrupt)
+    previous_usr1 = signal.signal(signal.SIGUSR1, on_report) if hasattr(signal, "SIGUSR1") else None
+    try:
+        say(f"performing {config.name}: {len(config.performers)} performers, "
+            f"{len(config.characters)} characters, {session.mode.value} mode, {config.fps} fps")
+        report = session.run(duration=duration, progress=progress)
+    finally:
+        signal.signal(signal.SIGINT, previous_int)
+        if previous_usr1 is not None:
+            signal.signal(signal.SIGUSR1, previous_usr1)
+    return session, report, bool(interrupted)
+
+
+def run(args) -> int:
+    from mop.session import Mode, load_session
+    from mop.session.build import Overrides
+    from mop.session.config import REPLAY_PREFIX, parse_host_port
+
+    config = load_session(args.session)
+    replay = parse_replay(args.replay)
+    names = [p.name for p in config.performers]
+    for performer in replay:
+        if performer not in names:
+            raise ValueError(f"--replay: no performer {performer!r} in {config.path}; the "
+                             f"session has {', '.join(names)}")
+    if args.replay is not None and not args.realtime:
+        live = [p for p in config.performers
+                if not replay.get(p.name, p.source).startswith(REPLAY_PREFIX)]
+        if live:
+            raise ValueError(f"--replay: performer {live[0].name!r} has a live source "
+                             f"({live[0].source}); give --replay {live[0].name}=TAKE, or "
+                             f"--realtime to follow it live")
+    mode = Mode.REPLAY if args.replay is not None and not args.realtime else Mode.LIVE
+    osc = parse_host_port(args.osc_out, key="--osc-out") if args.osc_out else None
+    out = args.out
+    overrides = Overrides(replay=replay, video=out, png=args.png, osc=osc,
+                          preview=args.preview, preview_host=args.preview_host,
+                          loop_takes=args.loop, render=not args.no_render)
+    session, report, interrupted = perform(config, mode=mode, overrides=overrides,
+                                           duration=args.duration, quiet=args.quiet)
+    if interrupted:
+        print("interrupted: every output was finalised", file=sys.stderr)
+    print(report.format())
+    for output in session.outputs:
+        path = getattr(output, "path", None) or getattr(output, "folder", None)
+        if path is not None:
+            print(f"wrote {path} ({output.frames} frames)")
+    return 130 if interrupted else 0

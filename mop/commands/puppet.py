@@ -1,0 +1,187 @@
+"""`mop puppet IMAGE --motion MOTION --out OUT`: turn a picture into an elastic puppet, play a
+motion on its pins and write the rendered frames (MP4, MKV, GIF or PNG sequence).
+
+Pins come from --pins PINS.json, else from a "pins" section inside the motion file, else from a
+sidecar IMAGE.pins.json next to the picture. A pins file is
+{"pins": {"hand": {"xy": [x, y]}, "feet": {"xy": [x, y], "fixed": true}}} in picture pixels
+({"hand": [x, y]} is accepted too). Motion channels name driven pins and give their positions in
+picture pixels over time (characters.Motion JSON).
+"""
+from __future__ import annotations
+
+import json
+import sys
+import time
+from pathlib import Path
+
+
+def register(subparsers) -> None:
+    parser = subparsers.add_parser(
+        "puppet", help="animate a picture as an elastic puppet and render it",
+        description="Animate a picture of a character as an elastic 2D puppet: background "
+                    "removal, a triangle mesh, pins driven by a motion, texture-mapped frames.")
+    parser.add_argument("image", type=Path, help="picture of a character (PNG/JPEG; a plain "
+                        "background or an alpha channel)")
+    parser.add_argument("--motion", type=Path, help="motion JSON whose channels drive the pins")
+    parser.add_argument("--out", type=Path, help="output: .mp4, .mkv (lossless), .gif, or a "
+                        "folder / name_%%05d.png for PNG frames with alpha")
+    parser.add_argument("--show-mesh", type=Path, metavar="PNG",
+                        help="also save a picture of the mesh and pins over the image")
+    parser.add_argument("--pins", type=Path, metavar="PINS.json",
+                        help="pin positions (default: the motion's 'pins', or IMAGE.pins.json)")
+    parser.add_argument("--material", default="rubber",
+                        help="liquid, fabric, rubber (default) or rigid")
+    parser.add_argument("--mode", choices=("springs", "arap"), default="springs",
+                        help="springs: mass-spring dynamics (default); arap: as-rigid-as-"
+                             "possible posing")
+    parser.add_argument("--background", default=None,
+                        help="transparent, #rrggbb or chroma (default: transparent if the "
+                             "format keeps alpha, else white)")
+    parser.add_argument("--fps", type=float, default=25.0, help="frames per second (25)")
+    parser.add_argument("--duration", type=float, default=None,
+                        help="seconds to render (default: the motion's duration)")
+    parser.add_argument("--cell-size", type=float, default=None,
+                        help="mesh cell size in picture pixels (default: 1/24 of the character)")
+    parser.add_argument("--tolerance", type=float, default=None,
+                        help="background colour tolerance, 0..255 (default: automatic)")
+    parser.set_defaults(func=run)
+
+
+def load_pins(path: Path) -> dict:
+    """A pins JSON file -> {name: {"xy": [x, y], "fixed": bool}}."""
+    try:
+        data = json.loads(path.read_text())
+    except FileNotFoundError:
+        raise FileNotFoundError(f"pins file not found: {path}") from None
+    except json.JSONDecodeError as error:
+        raise ValueError(f"{path}: not valid JSON ({error})") from None
+    return parse_pins(data.get("pins", data) if isinstance(data, dict) else data, str(path))
+
+
+def parse_pins(pins, where: str) -> dict:
+    if not isinstance(pins, dict) or not pins:
+        raise ValueError(f"{where}: expected pins as {{name: {{'xy': [x, y], 'fixed': false}}}}, "
+                         f"got {str(pins)[:80]}")
+    parsed = {}
+    for name, pin in pins.items():
+        entry = pin if isinstance(pin, dict) else {"xy": pin}
+        xy = entry.get("xy")
+        try:
+            x, y = (float(v) for v in xy)
+        except (TypeError, ValueError):
+            raise ValueError(f"{where}: pin {name!r} needs 'xy': [x, y] in pixels, got "
+                             f"{xy!r}") from None
+        parsed[name] = {"xy": (x, y), "fixed": bool(entry.get("fixed", False))}
+    return parsed
+
+
+class Progress:
+    """A one-line progress bar on stderr (redrawn in place when stderr is a terminal)."""
+
+    def __init__(self, total: int, label: str, *, stream=None, width: int = 30):
+        self.total = max(1, total)
+        self.label = label
+        self.stream = stream or sys.stderr
+        self.width = width
+        self.start = time.perf_counter()
+        self.tty = self.stream.isatty()
+        self._last = -1
+
+    def update(self, done: int) -> None:
+        percent = int(100 * done / self.total)
+        if not self.tty and percent // 10 == self._last // 10 and done < self.total:
+            return  # in a log, one line per 10%
+        if percent == self._last and done < self.total:
+            return
+        self._last = percent
+        filled = int(self.width * done / self.total)
+        elapsed = time.perf_counter() - self.start
+        eta = elapsed / done * (self.total - done) if done else 0.0
+        line = (f"{self.label} [{'#' * filled}{'.' * (self.width - filled)}] {done}/{self.total}"
+                f" {elapsed:5.1f}s, {eta:4.1f}s left")
+        self.stream.write(("\r" + line) if self.tty else (line + "\n"))
+        if self.tty and done >= self.total:
+            self.stream.write("\n")
+        self.stream.flush()
+
+
+def run(args) -> int:
+    import numpy as np
+    from PIL import Image
+
+    from characters import ImagePuppet, Motion
+    from mop.export import open_writer
+    from mop.render.image2d import ImageRenderer, puppet_preview
+
+    if args.out is None and args.show_mesh is None:
+        raise ValueError("nothing to do: give --out OUT (with --motion) and/or --show-mesh PNG")
+    if args.out is not None and args.motion is None:
+        raise ValueError("--out needs --motion MOTION.json to know how the pins move")
+    if not args.fps > 0:
+        raise ValueError(f"--fps must be > 0, got {args.fps}")
+
+    motion = None
+    pins = None
+    if args.motion is not None:
+        motion = Motion.load(args.motion)
+        data = json.loads(args.motion.read_text())
+        if isinstance(data, dict) and "pins" in data:
+            pins = parse_pins(data["pins"], str(args.motion))
+    if args.pins is not None:
+        pins = load_pins(args.pins)
+    if pins is None:
+        sidecar = args.image.with_name(args.image.stem + ".pins.json")
+        if sidecar.exists():
+            pins = load_pins(sidecar)
+    if pins is None and motion is not None and motion.channel_names:
+        raise ValueError(f"the motion drives pins {motion.channel_names} but no pin positions "
+                         f"were given: use --pins PINS.json, a 'pins' section in the motion "
+                         f"file, or {args.image.stem}.pins.json next to the image")
+
+    started = time.perf_counter()
+    puppet = ImagePuppet.from_image(args.image, cell_size=args.cell_size,
+                                    tolerance=args.tolerance, material=args.material,
+                                    mode=args.mode)
+    for name, pin in (pins or {}).items():
+        puppet.add_pin(pin["xy"], name=name, fixed=pin["fixed"])
+    height, width = puppet.mask.shape
+    print(f"built {puppet} in {time.perf_counter() - started:.2f} s")
+
+    if args.show_mesh is not None:
+        args.show_mesh.parent.mkdir(parents=True, exist_ok=True)
+        Image.fromarray(puppet_preview(puppet)).save(args.show_mesh)
+        print(f"wrote mesh preview {args.show_mesh}")
+    if args.out is None:
+        return 0
+
+    puppet.check_motion(motion)
+    duration = motion.duration if args.duration is None else float(args.duration)
+    if not duration >= 0:
+        raise ValueError(f"--duration must be >= 0 s, got {duration}")
+    frame_count = int(np.floor(duration * args.fps + 1e-9)) + 1
+    renderer = ImageRenderer(puppet.image, puppet.vertices, puppet.triangles,
+                             size=(width, height), background=args.background or "transparent")
+    frame = np.empty((height, width, 4), np.uint8)
+    progress = Progress(frame_count, f"rendering {args.out.name}")
+    simulate_time = render_time = 0.0
+    with open_writer(args.out, fps=args.fps, size=(width, height),
+                     background=args.background) as writer:
+        puppet.reset()
+        for index in range(frame_count):
+            tick = time.perf_counter()
+            targets = motion.sample(index / args.fps)
+            if index == 0:
+                if puppet.mode.value == "arap":
+                    puppet.step(1.0 / args.fps, targets)
+            else:
+                puppet.step(1.0 / args.fps, targets)
+            tock = time.perf_counter()
+            renderer.render_into(puppet.state.x, frame)
+            writer.write(frame)
+            simulate_time += tock - tick
+            render_time += time.perf_counter() - tock
+            progress.update(index + 1)
+    print(f"wrote {args.out}: {frame_count} frames {width}x{height} at {args.fps:g} fps "
+          f"(simulation {1e3 * simulate_time / frame_count:.2f} ms/frame, render+encode "
+          f"{1e3 * render_time / frame_count:.2f} ms/frame)")
+    return 0

@@ -1,0 +1,297 @@
+"""`mop record`: record a demonstration: the performer acts along with a motion while their
+input is captured; the action-motion pair is stored as a take.
+
+Headless: the motion "plays" as a countdown and a progress bar in the terminal, and a preview
+video of the motion (its channels as curves with a moving cursor) is written with OpenCV, to
+watch beside the performer. The action is captured for the motion's duration, time-aligned to
+it (MOP 3.1.3: the captured interval is normalised onto the motion's duration), written while
+capturing (crash-safe), and right after, the new action is compared with the performer's other
+takes: how confusable it is with them (`followers.confusability`).
+"""
+from __future__ import annotations
+
+import sys
+import time
+from pathlib import Path
+
+PREVIEW_SIZE = (640, 360)
+PREVIEW_FPS = 25
+
+
+def register(subparsers) -> None:
+    parser = subparsers.add_parser(
+        "record", help="record a take: act along with a motion while a source is captured",
+        description="Plays a motion (countdown and progress in the terminal, plus a preview "
+                    "video), captures the performer's source for the motion's duration, "
+                    "time-aligns action and motion, stores the take, and reports how confusable "
+                    "the new action is with the performer's other takes.")
+    parser.add_argument("--performer", required=True, help="who performs")
+    parser.add_argument("--action", required=True, help="the action's name (e.g. wave)")
+    parser.add_argument("--motion", required=True, metavar="MOTION",
+                        help="the motion to act along with: a motion .json file, or the name of "
+                             "a take whose motion to reuse")
+    parser.add_argument("--source", required=True, metavar="SPEC",
+                        help="what to capture, e.g. hid:p5, camera:0:aruco, "
+                             "osc:127.0.0.1:9000/glove, replay:recordings/NAME")
+    parser.add_argument("--recordings", default="recordings", metavar="DIR",
+                        help="the take folder (default: recordings)")
+    parser.add_argument("--name", default=None, help="the take's name (default: "
+                                                     "PERFORMER-ACTION-NNN)")
+    parser.add_argument("--rate", type=float, default=50.0,
+                        help="session rate [Hz] the take's template is sampled at (default 50)")
+    parser.add_argument("--countdown", type=float, default=3.0,
+                        help="seconds of countdown before the motion starts (default 3)")
+    parser.add_argument("--preview", default=None, metavar="VIDEO",
+                        help="where to write the motion preview video (default: "
+                             "out/preview-ACTION.mp4; 'none' to skip)")
+    parser.add_argument("--wait", type=float, default=5.0,
+                        help="seconds to wait for the source's first frame (default 5)")
+    parser.set_defaults(func=run)
+
+
+# -- the preview video ------------------------------------------------------------------------
+
+def write_motion_preview(motion, path, *, fps: float = PREVIEW_FPS,
+                         size: tuple[int, int] = PREVIEW_SIZE) -> Path:
+    """A video of the motion: each channel component as a curve over the whole clip, a cursor
+    at the current time, and a progress bar. Written with OpenCV (.mp4: mp4v, .avi: MJPG,
+    .mkv: FFV1). Returns the path."""
+    import cv2
+    import numpy as np
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    codecs = {".mp4": "mp4v", ".avi": "MJPG", ".mkv": "FFV1", ".webm": "VP80"}
+    fourcc = codecs.get(path.suffix.lower())
+    if fourcc is None:
+        raise ValueError(f"preview video must be .mp4, .avi, .mkv or .webm, got {path}")
+    width, height = size
+    duration = max(motion.duration, 1.0 / fps)
+    frames = int(np.ceil(duration * fps)) + 1
+    grid = np.linspace(0.0, duration, 200)
+    sampled = motion.sample_many(grid)
+    rows = []
+    for name, block in sampled.items():
+        block = np.asarray(block, dtype=np.float64).reshape(grid.size, -1)
+        for k in range(block.shape[1]):
+            rows.append((name if block.shape[1] == 1 else f"{name}.{k}", block[:, k]))
+    rows = rows[:10]   # a readable preview; the take keeps every channel
+    left, right, top, bottom = 110, 20, 20, 40
+    plot_w = width - left - right
+    lane = (height - top - bottom) / max(len(rows), 1)
+    background = np.zeros((height, width, 3), np.uint8)
+    background[:] = (30, 30, 30)
+    colours = [(80, 200, 255), (120, 255, 120), (255, 160, 80), (200, 120, 255),
+               (80, 255, 255), (255, 255, 120)]
+    for k, (label, values) in enumerate(rows):
+        low, high = float(np.min(values)), float(np.max(values))
+        span = high - low if high > low else 1.0
+        y0 = top + k * lane
+        ys = y0 + lane * 0.85 - (values - low) / span * lane * 0.7
+        xs = left + grid / duration * plot_w
+        points = np.stack([xs, ys], axis=1).round().astype(np.int32)
+        cv2.polylines(background, [points], False, colours[k % len(colours)], 2, cv2.LINE_AA)
+        cv2.putText(background, label[:14], (8, int(y0 + lane * 0.6)),
+                    cv2.FONT_HERSHEY_SIMPLEX, 0.45, (220, 220, 220), 1, cv2.LINE_AA)
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*fourcc), fps, (width, height))
+    if not writer.isOpened():
+        raise OSError(f"OpenCV cannot write {path} with codec {fourcc}")
+    frame = np.empty_like(background)
+    try:
+        for index in range(frames):
+            t = min(index / fps, duration)
+            np.copyto(frame, background)
+            x = int(round(left + t / duration * plot_w))
+            cv2.line(frame, (x, top), (x, height - bottom), (255, 255, 255), 1)
+            bar = int(round(t / duration * (width - 2 * 8)))
+            cv2.rectangle(frame, (8, height - 24), (8 + bar, height - 12), (90, 200, 90), -1)
+            cv2.putText(frame, f"{t:5.2f} / {duration:.2f} s", (width - 170, height - 28),
+                        cv2.FONT_HERSHEY_SIMPLEX, 0.5, (230, 230, 230), 1, cv2.LINE_AA)
+            writer.write(frame)
+    finally:
+        writer.release()
+    return path
+
+
+# -- confusability ------------------------------------------------------------------------------
+
+def confusability_report(templates: dict, new_name: str) -> list[str]:
+    """Lines saying how confusable take `new_name` is with the others, from
+    followers.confusability(templates: {name: (T, D) array}) (imported here, lazily: mop is the
+    only package that may call into followers)."""
+    import numpy as np
+
+    if len(templates) < 2:
+        return ["confusability: this is the performer's first take on these channels; nothing "
+                "to compare yet"]
+    try:
+        from followers import confusability
+    except ImportError:
+        # TODO(followers): followers.confusability is written concurrently by the followers
+        # teammate; until it exists this report cannot be made.
+        return ["confusability: followers.confusability is not available in this install; "
+                "the take is stored, compare later with `mop train`"]
+    result = confusability(dict(templates))
+    names = list(getattr(result, "names", templates))
+    matrix = np.asarray(getattr(result, "matrix", result), dtype=float)
+    if matrix.shape != (len(names), len(names)) or new_name not in names:
+        return [f"confusability: unexpected result {type(result).__name__} "
+                f"{getattr(matrix, 'shape', '')}"]
+    k = names.index(new_name)
+    lines = ["confusability with the performer's other takes (row: demonstration, column: "
+             "follower; higher = more confusable):"]
+    others = sorted((j for j in range(len(names)) if j != k),
+                    key=lambda j: -max(matrix[k, j], matrix[j, k]))
+    for j in others:
+        lines.append(f"  {names[j]:<24} new as {names[j]}: {matrix[k, j]:.3f}   "
+                     f"{names[j]} as new: {matrix[j, k]:.3f}")
+    return lines
+
+
+# -- the command ------------------------------------------------------------------------------
+
+def _load_motion(spec: str, store):
+    from characters import Motion
+    path = Path(spec)
+    if path.suffix.lower() == ".json":
+        return Motion.load(path)
+    if spec in store:
+        take = store.load(spec)
+        if take.motion is None:
+            raise ValueError(f"take {spec!r} has no motion to reuse")
+        return take.motion
+    raise FileNotFoundError(f"--motion {spec!r}: neither a motion .json file nor a take in "
+                            f"{store.path}")
+
+
+class _Progress:
+    """One terminal line, redrawn in place on a terminal, a line per second otherwise."""
+
+    def __init__(self, stream=sys.stdout):
+        self.stream = stream
+        self.tty = stream.isatty()
+        self.last = -1.0
+
+    def show(self, text: str, *, now: float, force: bool = False) -> None:
+        if self.tty:
+            self.stream.write("\r" + text.ljust(78))
+            self.stream.flush()
+        elif force or now - self.last >= 1.0:
+            self.stream.write(text + "\n")
+            self.stream.flush()
+            self.last = now
+
+    def done(self) -> None:
+        if self.tty:
+            self.stream.write("\n")
+            self.stream.flush()
+
+
+def _bar(fraction: float, width: int = 30) -> str:
+    filled = int(round(max(0.0, min(1.0, fraction)) * width))
+    return "#" * filled + "." * (width - filled)
+
+
+def run(args) -> int:
+    from capture import open_source
+    from mop.takes import TakeStore, check_name, performer_templates
+
+    if not args.rate > 0:
+        raise ValueError(f"--rate must be > 0 Hz, got {args.rate}")
+    if args.countdown < 0:
+        raise ValueError(f"--countdown must be >= 0 s, got {args.countdown}")
+    if args.name:
+        check_name(args.name)
+    store = TakeStore(args.recordings)
+    motion = _load_motion(args.motion, store)
+    duration = float(motion.duration)
+    if not duration > 0:
+        raise ValueError(f"the motion lasts {duration} s; nothing to act along with")
+
+    preview = None
+    if (args.preview or "").lower() != "none":
+        preview = Path(args.preview or f"out/preview-{args.action}.mp4")
+        write_motion_preview(motion, preview)
+        print(f"motion preview: {preview} ({duration:.2f} s, {len(motion.channel_names)} "
+              f"channels) - play it beside you while recording")
+
+    source = open_source(args.source)
+    progress = _Progress()
+    recorder = None
+    try:
+        clock = source.clock
+        first = source.read(timeout=args.wait)
+        if first is None:
+            raise OSError(f"{args.source}: no frame within {args.wait:g} s (status "
+                          f"{source.status.value}); is the performer's input running?")
+        print(f"source {args.source}: {len(source.channels)} channels "
+              f"({', '.join(source.channels[:8])}{', ...' if len(source.channels) > 8 else ''})")
+        end_countdown = clock.now() + args.countdown
+        shown = None
+        while (left := end_countdown - clock.now()) > 0:
+            second = int(left) + 1
+            if second != shown:
+                print(f"  {args.action} starts in {second}...", flush=True)
+                shown = second
+            source.read(timeout=min(left, 0.05))   # keep the queue fresh; frames not kept
+        while source.read(timeout=0) is not None:
+            pass
+        start = clock.now()
+        recorder = store.record(performer=args.performer, action=args.action,
+                                channels=source.channels or None, motion=motion,
+                                rate=args.rate, device=args.source,
+                                device_info=source.describe(), stream_rate=source.rate,
+                                name=args.name, start=start,
+                                extra={"preview": str(preview) if preview else None})
+        print(f"  GO - recording {recorder.name} for {duration:.2f} s", flush=True)
+        end = start + duration
+        while (now := clock.now()) < end:
+            frame = source.read(timeout=min(0.05, max(end - now, 0.001)))
+            if frame is not None and start <= frame.t <= end:
+                recorder.append_frame(frame, channels=source.channels)
+            now = clock.now()
+            elapsed = min(now - start, duration)
+            progress.show(f"  {args.action} [{_bar(elapsed / duration)}] {elapsed:5.2f} / "
+                          f"{duration:.2f} s  frames {recorder.frames}  "
+                          f"{source.status.value}", now=now)
+        # frames that arrived by the end but were still queued
+        while (frame := source.read(timeout=0)) is not None:
+            if start <= frame.t <= end:
+                recorder.append_frame(frame, channels=source.channels)
+        progress.show(f"  {args.action} [{_bar(1.0)}] {duration:5.2f} / {duration:.2f} s  "
+                      f"frames {recorder.frames}", now=clock.now(), force=True)
+        progress.done()
+        stats = source.stats
+        # time alignment (MOP 3.1.3): the captured interval [0, duration] of the recorder's
+        # clock is what pairs with the whole motion; Take.aligned() normalises it
+        alignment = {"method": "duration", "action_start": 0.0, "action_end": duration,
+                     "motion_duration": duration}
+        recorder.update(source_stats={"frames": stats.frames, "dropped": stats.dropped,
+                                      "malformed": stats.malformed,
+                                      "nan_values": stats.nan_values})
+        if recorder.frames < 2:
+            recorder.discard()
+            raise OSError(f"{args.source}: only {recorder.frames} frame(s) arrived during the "
+                          f"{duration:.2f} s take; nothing stored")
+        name = recorder.finish(alignment=alignment)
+    except KeyboardInterrupt:
+        if recorder is not None:
+            recorder.abort()
+            print(f"\ninterrupted: the partial take is kept as {recorder.name} (marked "
+                  f"interrupted); delete it with `mop takes delete {recorder.name}`",
+                  file=sys.stderr)
+        raise
+    finally:
+        source.close()
+
+    take = store.load(name)
+    missing = int(take.values.size - (take.values == take.values).sum())
+    print(f"stored take {name}: {take.times.size} frames, {len(take.channels)} channels, "
+          f"{missing} missing values, {stats.malformed} malformed inputs skipped, "
+          f"{stats.dropped} dropped -> {store.file(name)}")
+    templates = performer_templates(store, args.performer, rate=args.rate,
+                                    channels=take.channels)
+    templates[name] = take.aligned(args.rate)[1]
+    for line in confusability_report(templates, name):
+        print(line)
+    return 0

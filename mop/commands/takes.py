@@ -1,0 +1,152 @@
+"""`mop takes list|show|export|delete`: the recorded takes of a recordings folder."""
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+DEFAULT_FOLDER = "recordings"
+
+
+def register(subparsers) -> None:
+    parser = subparsers.add_parser(
+        "takes", help="list, show, export or delete recorded takes",
+        description="Manages the takes (recorded action + motion pairs) in a recordings folder.")
+    parser.add_argument("--recordings", default=DEFAULT_FOLDER, metavar="DIR",
+                        help=f"the take folder (default: {DEFAULT_FOLDER})")
+    actions = parser.add_subparsers(dest="takes_command", metavar="ACTION")
+    listing = actions.add_parser("list", help="one line per take")
+    listing.add_argument("--performer", help="only this performer's takes")
+    show = actions.add_parser("show", help="everything about one take")
+    show.add_argument("name")
+    show.add_argument("--salvage", action="store_true",
+                      help="show what can be read from a damaged take file")
+    export = actions.add_parser("export", help="write a take as .npz or CSV")
+    export.add_argument("name")
+    export.add_argument("--format", choices=("npz", "csv"), default=None,
+                        help="default: from the --out suffix, else npz")
+    export.add_argument("--out", default=None, metavar="PATH",
+                        help="output file (default: NAME.npz / NAME.csv in the current folder)")
+    export.add_argument("--salvage", action="store_true",
+                        help="export what can be read from a damaged take file")
+    delete = actions.add_parser("delete", help="delete a take file")
+    delete.add_argument("name")
+    delete.add_argument("--yes", action="store_true", help="do not ask for confirmation")
+    parser.set_defaults(func=run, takes_parser=parser)
+
+
+def run(args) -> int:
+    from mop.takes import TakeStore
+
+    command = getattr(args, "takes_command", None)
+    if command is None:
+        args.takes_parser.print_help()
+        return 2
+    folder = Path(args.recordings)
+    if not folder.is_dir():
+        raise FileNotFoundError(f"take folder not found: {folder}")
+    store = TakeStore(folder, create=False)
+    return {"list": _list, "show": _show, "export": _export, "delete": _delete}[command](
+        store, args)
+
+
+def _list(store, args) -> int:
+    infos = store.list(performer=args.performer)
+    if not infos:
+        print(f"no takes in {store.path}" + (f" by {args.performer}" if args.performer else ""))
+        return 0
+    width = max(len(i.name) for i in infos)
+    print(f"{'name':<{width}}  {'performer':<10} {'action':<12} {'seconds':>7} {'frames':>6}"
+          f"  channels")
+    for info in infos:
+        if info.problem and info.performer == "?":
+            print(f"{info.name:<{width}}  DAMAGED: {info.problem}")
+            continue
+        note = "" if info.complete else "  (interrupted)"
+        channels = ", ".join(info.channels)
+        if len(channels) > 40:
+            channels = channels[:37] + "..."
+        print(f"{info.name:<{width}}  {info.performer:<10} {info.action:<12} "
+              f"{info.duration:>7.2f} {info.frames:>6}  {len(info.channels)}: {channels}{note}")
+    return 0
+
+
+def _show(store, args) -> int:
+    import numpy as np
+
+    from mop.takes import TakeError
+    try:
+        take = store.load(args.name, salvage=args.salvage)
+    except KeyError:
+        raise FileNotFoundError(f"no take {args.name!r} in {store.path}; see `mop takes list`"
+                                ) from None
+    except TakeError as error:
+        print(f"mop takes show: error: {error}", file=sys.stderr)
+        return 1
+    print(f"take {take.name}  ({store.file(take.name)})")
+    print(f"  performer   {take.performer}")
+    print(f"  action      {take.action}")
+    print(f"  recorded    {take.created or '?'}" + ("" if take.complete else
+                                                     "  (INTERRUPTED: ends at its last commit)"))
+    print(f"  device      {take.device or '?'}")
+    print(f"  rate        {take.rate:g} Hz (templates)")
+    for name, stream in take.streams.items():
+        n = stream.times.size
+        span = float(stream.times[-1] - stream.times[0]) if n > 1 else 0.0
+        missing = int(np.count_nonzero(np.isnan(stream.values)))
+        print(f"  stream {name!r}: {n} frames over {span:.3f} s ({stream.rate:g} Hz nominal), "
+              f"{len(stream.channels)} channels, {missing} missing values")
+        for column, channel in enumerate(stream.channels):
+            values = stream.values[:, column] if n else np.zeros(0)
+            finite = values[np.isfinite(values)]
+            if finite.size:
+                print(f"      {channel:<18} min {finite.min():>10.4g}  max {finite.max():>10.4g}"
+                      f"  mean {finite.mean():>10.4g}")
+            else:
+                print(f"      {channel:<18} (no value)")
+    if take.motion is not None:
+        print(f"  motion      {len(take.motion.channel_names)} channels, "
+              f"{take.motion.duration:.3f} s: {', '.join(take.motion.channel_names)}")
+    else:
+        print("  motion      none")
+    if take.alignment:
+        print("  alignment   " + ", ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}"
+                                           for k, v in take.alignment.items()))
+    if take.calibration:
+        print(f"  calibration {take.calibration}")
+    for problem in take.problems:
+        print(f"  problem     {problem}")
+    return 0
+
+
+def _export(store, args) -> int:
+    format = args.format
+    out = Path(args.out) if args.out else None
+    if format is None:
+        format = out.suffix.lstrip(".") if out is not None and out.suffix in (".npz", ".csv") \
+            else "npz"
+    if out is None:
+        out = Path(f"{args.name}.{format}")
+    try:
+        written = store.export(args.name, out, format=format, salvage=args.salvage)
+    except KeyError:
+        raise FileNotFoundError(f"no take {args.name!r} in {store.path}; see `mop takes list`"
+                                ) from None
+    for path in written:
+        print(f"wrote {path}")
+    return 0
+
+
+def _delete(store, args) -> int:
+    path = store.file(args.name)
+    if not path.is_file():
+        raise FileNotFoundError(f"no take {args.name!r} in {store.path}")
+    if not args.yes:
+        if not sys.stdin.isatty():
+            raise ValueError(f"refusing to delete {path} without --yes (no terminal to ask)")
+        answer = input(f"delete {path}? [y/N] ").strip().lower()
+        if answer not in ("y", "yes"):
+            print("kept")
+            return 1
+    store.delete(args.name)
+    print(f"deleted {path}")
+    return 0

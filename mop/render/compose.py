@@ -1,0 +1,137 @@
+"""Composing several characters into one frame, and a plain mesh renderer to fall back on.
+
+Every character renders into its own RGBA layer (straight alpha, uint8); `Stage` places the layers
+into one frame over a colour, a chroma-key colour or transparency, back to front in session order.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+
+def parse_colour(text: str) -> tuple[int, int, int]:
+    """'#rrggbb' -> (r, g, b) ints in 0..255."""
+    if not isinstance(text, str) or len(text) != 7 or text[0] != "#":
+        raise ValueError(f"expected a colour '#rrggbb', got {text!r}")
+    return tuple(int(text[i:i + 2], 16) for i in (1, 3, 5))
+
+
+def blend_over(canvas: np.ndarray, layer: np.ndarray, x0: int, y0: int, *,
+               opaque: bool = False) -> None:
+    """Alpha-composite `layer` over `canvas` in place, top-left corner at (x0, y0) [px].
+
+    canvas : (H, W, 4) uint8 RGBA, straight alpha; layer : (h, w, 4) uint8 RGBA, straight alpha.
+    Parts of the layer outside the canvas are clipped. `opaque=True` promises the canvas is
+    opaque everywhere (a colour background), which allows integer arithmetic (faster)."""
+    height, width = canvas.shape[:2]
+    h, w = layer.shape[:2]
+    xa, ya = max(x0, 0), max(y0, 0)
+    xb, yb = min(x0 + w, width), min(y0 + h, height)
+    if xa >= xb or ya >= yb:
+        return
+    if opaque:
+        src = layer[ya - y0:yb - y0, xa - x0:xb - x0]
+        dst = canvas[ya:yb, xa:xb, :3]
+        alpha = src[..., 3:4].astype(np.uint16)
+        mixed = src[..., :3] * alpha
+        mixed += dst * (255 - alpha)
+        mixed += 127
+        mixed //= 255
+        dst[...] = mixed
+        return
+    src = layer[ya - y0:yb - y0, xa - x0:xb - x0].astype(np.float32) * (1.0 / 255.0)
+    dst = canvas[ya:yb, xa:xb].astype(np.float32) * (1.0 / 255.0)
+    src_alpha = src[..., 3:4]
+    dst_alpha = dst[..., 3:4]
+    out_alpha = src_alpha + dst_alpha * (1.0 - src_alpha)
+    colour = src[..., :3] * src_alpha + dst[..., :3] * dst_alpha * (1.0 - src_alpha)
+    safe = np.where(out_alpha > 0, out_alpha, 1.0)
+    result = np.empty_like(src)
+    result[..., :3] = colour / safe
+    result[..., 3:4] = out_alpha
+    canvas[ya:yb, xa:xb] = np.clip(result * 255.0 + 0.5, 0, 255).astype(np.uint8)
+
+
+class Stage:
+    """The frame: a background and the characters' layers placed on it.
+
+    size : (width, height) [px]; background : (r, g, b) or None for transparent."""
+
+    def __init__(self, size: tuple[int, int], background: tuple[int, int, int] | None):
+        self.width, self.height = int(size[0]), int(size[1])
+        self.background = background
+        self.frame = np.zeros((self.height, self.width, 4), dtype=np.uint8)
+
+    def clear(self) -> np.ndarray:
+        if self.background is None:
+            self.frame[...] = 0
+        else:
+            self.frame[..., :3] = self.background
+            self.frame[..., 3] = 255
+        return self.frame
+
+    def place(self, layer: np.ndarray, centre: tuple[float, float]) -> None:
+        """Draw a layer centred at `centre` = (x, y) as fractions of the frame's width, height."""
+        h, w = layer.shape[:2]
+        x0 = int(round(centre[0] * self.width - w / 2))
+        y0 = int(round(centre[1] * self.height - h / 2))
+        blend_over(self.frame, layer, x0, y0, opaque=self.background is not None)
+
+
+class MeshLayerRenderer:
+    """Flat-shaded orthographic drawing of any puppet's `surface()` and `faces`.
+
+    The fallback when a puppet kind has no renderer of its own (and the renderer of test
+    stand-ins). 2D surfaces are in image coordinates (y down); 3D surfaces are viewed along -z
+    with y up. The rest surface's bounding box, plus `margin`, fills the layer.
+
+    rest : (V, 2|3) float, faces : (F, 3) int, height : layer height [px]."""
+
+    def __init__(self, rest: np.ndarray, faces: np.ndarray, *, height: int,
+                 colour: tuple[int, int, int] = (200, 140, 90), margin: float = 0.25):
+        import cv2  # noqa: F401  (checked here so a missing OpenCV fails at build, not mid-show)
+        rest = np.asarray(rest, dtype=np.float64)
+        self.faces = np.asarray(faces, dtype=np.int64)
+        self.dim = rest.shape[1]
+        self.colour = np.asarray(colour, dtype=np.float64)
+        xy = self._project(rest)
+        low, high = xy.min(0), xy.max(0)
+        extent = (high - low) * (1.0 + 2.0 * margin)
+        extent = np.maximum(extent, 1e-9)
+        self.scale = height / extent[1]
+        self.height = int(height)
+        self.width = max(2, int(round(extent[0] * self.scale)))
+        self.offset = (low + high) / 2.0
+        self.layer = np.zeros((self.height, self.width, 4), dtype=np.uint8)
+
+    def _project(self, vertices: np.ndarray) -> np.ndarray:
+        if self.dim == 2:
+            return vertices[:, :2]
+        return np.stack([vertices[:, 0], -vertices[:, 1]], axis=1)
+
+    def render(self, puppet) -> np.ndarray:
+        """(h, w, 4) uint8 RGBA layer of the puppet's surface now."""
+        import cv2
+        vertices = np.asarray(puppet.surface(), dtype=np.float64)
+        xy = (self._project(vertices) - self.offset) * self.scale
+        xy += (self.width / 2.0, self.height / 2.0)
+        pixels = np.round(xy * 16).astype(np.int32)  # 4 bits of sub-pixel precision
+        self.layer[...] = 0
+        triangles = pixels[self.faces]
+        if self.dim == 3:
+            a, b, c = (vertices[self.faces[:, k]] for k in range(3))
+            normal = np.cross(b - a, c - a)
+            length = np.linalg.norm(normal, axis=1)
+            shade = np.abs(normal[:, 2]) / np.where(length > 0, length, 1.0)
+            order = np.argsort(vertices[self.faces].mean(1)[:, 2], kind="stable")
+        else:
+            shade = np.ones(len(self.faces))
+            order = np.arange(len(self.faces))
+        shade = 0.35 + 0.65 * shade
+        for face in order:
+            r, g, b = self.colour * shade[face]
+            cv2.fillConvexPoly(self.layer, triangles[face], (r, g, b, 255), lineType=cv2.LINE_AA,
+                               shift=4)
+        return self.layer
+
+    def close(self) -> None:
+        pass

@@ -1,0 +1,320 @@
+"""From a `SessionConfig` to a running `Session`: takes, followers, puppets, renderers, outputs.
+
+This is the one place that composes `capture`, `followers` and `characters`; everything the loop
+needs is built here, once, before the first frame.
+"""
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable, Mapping
+
+import numpy as np
+
+from .config import (ActionBinding, Background, CharacterConfig, CharacterKind, Normalise,
+                     PerformerConfig, REPLAY_PREFIX, SessionConfig, SessionError)
+from .feeds import SourceFeed, TakeFeed
+from .loop import CharacterRuntime, Mode, PerformerRuntime, Session, Track
+
+log = logging.getLogger(__name__)
+
+
+
+@dataclass
+class Overrides:
+    """What the command line may change without editing the session file."""
+    replay: Mapping[str, str] = field(default_factory=dict)   # performer -> take name or spec
+    video: str | None = None
+    png: str | None = None
+    osc: tuple[str, int] | None = None
+    preview: int | None = None
+    preview_host: str | None = None
+    loop_takes: bool = False
+    render: bool = True
+
+
+# --------------------------------------------------------------------------------------------
+# takes
+
+
+@dataclass(frozen=True)
+class TakeData:
+    """The parts of a take the session uses.
+
+    times : (K,) float [s]; values : (K, D) float (raw, NaN = missing); channels : D names;
+    motion : characters.Motion | None; take : the mop.takes.Take itself."""
+    name: str
+    times: np.ndarray
+    values: np.ndarray
+    channels: tuple[str, ...]
+    motion: Any
+    take: Any = None
+
+    def template(self, fps: float) -> np.ndarray:
+        """The action aligned to its motion's duration (MOP 3.1.3) and sampled at `fps`:
+        (T, D) float; without alignment metadata the whole recording maps onto the motion."""
+        if self.take is not None:
+            return self.take.aligned(fps)[1]
+        return resample(self.times, self.values, fps)
+
+
+def open_store(path: Path):
+    """The session's take store (a `mop.takes.TakeStore` folder)."""
+    from mop.takes import TakeStore
+    if not Path(path).is_dir():
+        raise FileNotFoundError(f"take folder not found: {path}")
+    return TakeStore(path, create=False)
+
+
+def take_data(store, name: str, *, where: str = "") -> TakeData:
+    """Read one take's action stream and motion from the store."""
+    try:
+        take = store.load(name)
+    except KeyError:
+        names = store.names()
+        raise SessionError(f"{where}take {name!r} is not in {store.path}; it has "
+                           f"{', '.join(names) or 'no takes'}") from None
+    return TakeData(name=name, times=np.asarray(take.times, dtype=np.float64),
+                    values=np.asarray(take.values, dtype=np.float64),
+                    channels=tuple(take.channels), motion=take.motion, take=take)
+
+
+def resample(times: np.ndarray, values: np.ndarray, fps: float) -> np.ndarray:
+    """A stream resampled at `fps`, linearly: (round(duration * fps) + 1, D). NaN stays NaN
+    around missing samples only where np.interp carries it."""
+    times = times - times[0]
+    count = int(round(times[-1] * fps)) + 1
+    grid = np.arange(count) / fps
+    out = np.empty((count, values.shape[1]))
+    for column in range(values.shape[1]):
+        out[:, column] = np.interp(grid, times, values[:, column])
+    return out
+
+
+# --------------------------------------------------------------------------------------------
+# followers
+
+
+def normalisation(templates: list[np.ndarray], how: Normalise) -> tuple[np.ndarray, np.ndarray]:
+    """(shift (D,), scale (D,)) so that (x - shift) / scale is what `how` asks, fitted on every
+    template of one performer together (followers.preprocessing.fit_normaliser)."""
+    if how is Normalise.NONE:
+        width = templates[0].shape[1]
+        return np.zeros(width), np.ones(width)
+    from followers.preprocessing import fit_normaliser
+    normaliser = fit_normaliser(list(templates), how=how.value)
+    return np.asarray(normaliser.shift, dtype=np.float64), np.asarray(normaliser.scale,
+                                                                      dtype=np.float64)
+
+
+def performer_templates(config: SessionConfig, performer: PerformerConfig,
+                        takes: Mapping[str, TakeData], *, where: str):
+    """{action: (T, D) normalised template}, channel names, shift, scale for one performer.
+
+    Each template is its take's action, aligned to the motion and sampled at the session rate:
+    the bank then steps once per session frame."""
+    actions = config.actions_of(performer.name)
+    if not actions:
+        raise SessionError(f"{where}: performers.{performer.name}: no [[actions]] name this "
+                           f"performer; expected at least one")
+    raw: dict[str, np.ndarray] = {}
+    channels = performer.channels
+    for action in actions:
+        if action.take in raw:
+            continue
+        data = takes[action.take]
+        wanted = channels or data.channels
+        missing = [c for c in wanted if c not in data.channels]
+        if missing:
+            key = "channels" if performer.channels else "source"
+            raise SessionError(
+                f"{where}: performers.{performer.name}.{key}: take {action.take!r} has no "
+                f"channel {missing[0]!r}; it has {', '.join(data.channels)}")
+        if not channels:
+            channels = data.channels
+        index = [data.channels.index(c) for c in channels]
+        raw[action.take] = data.template(config.fps)[:, index]
+    shift, scale = normalisation(list(raw.values()), performer.normalise)
+    templates = {name: (values - shift) / scale for name, values in raw.items()}
+    return templates, tuple(channels), shift, scale
+
+
+def build_bank(templates: Mapping[str, np.ndarray], performer: PerformerConfig):
+    try:
+        from followers import FollowerBank
+    except ImportError:  # the package may not export it yet
+        from followers.bank import FollowerBank
+    options = {}
+    if performer.sigma is not None:
+        options["sigma"] = performer.sigma
+    if performer.window is not None:
+        options["window"] = performer.window
+    return FollowerBank(dict(templates), **options)
+
+
+# --------------------------------------------------------------------------------------------
+# characters
+
+
+def build_character(character: CharacterConfig, *, frame_height: int):
+    """(puppet, renderer) for one character of the session."""
+    from . import puppets
+    return puppets.build(character, frame_height=frame_height)
+
+
+# --------------------------------------------------------------------------------------------
+# the whole session
+
+
+def build_session(config: SessionConfig, *, mode: Mode | str = Mode.REPLAY,
+                  overrides: Overrides | None = None,
+                  characters: Mapping[str, tuple[Any, Any]] | None = None,
+                  store=None, source_opener: Callable[[str], Any] | None = None,
+                  extra_outputs=(), progress: Callable[[str], None] | None = None) -> Session:
+    """Build everything a session needs and return it, ready to `run()`.
+
+    characters : {name: (puppet, renderer)} to use instead of building from the assets;
+    store : a take store to use instead of opening `config.takes`;
+    source_opener : spec -> capture source (default `capture.open_source`)."""
+    overrides = overrides or Overrides()
+    mode = Mode(mode)
+    where = str(config.path) if config.path else "<session>"
+    say = progress or (lambda text: None)
+    store = open_store(config.takes) if store is None else store
+
+    takes: dict[str, TakeData] = {}
+    for index, action in enumerate(config.actions):
+        if action.take not in takes:
+            takes[action.take] = take_data(store, action.take, where=f"{where}: actions[{index}]"
+                                           f".take: ")
+
+    performers = []
+    for performer in config.performers:
+        say(f"training the followers of {performer.name}")
+        templates, channels, shift, scale = performer_templates(config, performer, takes,
+                                                                where=where)
+        bank = build_bank(templates, performer)
+        spec = overrides.replay.get(performer.name, performer.source)
+        feed = _feed(spec, performer, store, config, mode=mode, loop=overrides.loop_takes,
+                     opener=source_opener, where=where)
+        runtime = PerformerRuntime(performer.name, feed, bank, channels=channels, shift=shift,
+                                   scale=scale, actions=tuple(templates))
+        performers.append(runtime)
+
+    frame_height = config.size[1]
+    built = []
+    for character in config.characters:
+        if characters is not None and character.name in characters:
+            puppet, renderer = characters[character.name]
+        else:
+            say(f"building {character.kind.value} character {character.name}")
+            puppet, renderer = build_character(character, frame_height=frame_height)
+        tracks = _tracks(config, character, puppet, takes, where=where)
+        built.append(CharacterRuntime(character.name, puppet, renderer,
+                                      position=character.position, tracks=tracks))
+
+    stage = None
+    if overrides.render:
+        from mop.render.compose import Stage
+        background = (None if config.background is Background.TRANSPARENT
+                      else config.background_colour)
+        stage = Stage(config.size, background)
+
+    outputs = _outputs(config, overrides)
+    outputs.extend(extra_outputs)
+    session = Session(performers, built, fps=config.fps, mode=mode, stage=stage,
+                      outputs=outputs, tail=config.blend, name=config.name)
+    for output in outputs:
+        if hasattr(output, "session"):
+            output.session = session
+    return session
+
+
+def _feed(spec: str, performer: PerformerConfig, store, config: SessionConfig, *, mode: Mode,
+          loop: bool, opener, where: str):
+    """replay:NAME (a take of the session's folder) or replay:PATH (a take file) is read on the
+    session's own clock (deterministic, faster than real time in replay mode); any other spec
+    is a live capture source."""
+    if spec.startswith(REPLAY_PREFIX):
+        name = spec[len(REPLAY_PREFIX):]
+        key = f"{where}: performers.{performer.name}.source: "
+        if name not in store:
+            path = Path(name)
+            if not path.is_absolute() and config.path is not None:
+                path = config.path.parent / path
+            folder, stem = path.parent, path.name.removesuffix(".sqlite")
+            if folder.is_dir() and (folder / f"{stem}.sqlite").is_file():
+                from mop.takes import TakeStore
+                data = take_data(TakeStore(folder, create=False), stem, where=key)
+                return TakeFeed(data.times, data.values, data.channels, name=stem, loop=loop)
+        data = take_data(store, name, where=key)
+        return TakeFeed(data.times, data.values, data.channels, name=name, loop=loop)
+    if opener is None:
+        from capture import open_source as opener
+    return SourceFeed(lambda: opener(spec), name=performer.name,
+                      stale_after=performer.stale_after)
+
+
+def _tracks(config: SessionConfig, character: CharacterConfig, puppet,
+            takes: Mapping[str, TakeData], *, where: str) -> list[Track]:
+    by_performer: dict[str, dict[str, tuple]] = {}
+    rest: dict[str, dict[str, np.ndarray]] = {}
+    owner: dict[str, tuple[str, int]] = {}
+    target_names = set(getattr(puppet, "target_names", ()))
+    for index, action in enumerate(config.actions):
+        if action.character != character.name:
+            continue
+        key = f"{where}: actions[{index}]"
+        motion = takes[action.take].motion
+        if motion is None:
+            raise SessionError(f"{key}.take: take {action.take!r} has no motion to play")
+        channels = action.channels or tuple((c, c) for c in motion.channel_names)
+        for channel, target in channels:
+            if channel not in motion.channel_names:
+                raise SessionError(f"{key}.channels: the motion of take {action.take!r} has no "
+                                   f"channel {channel!r}; it has "
+                                   f"{', '.join(motion.channel_names)}")
+            if target_names and target not in target_names:
+                raise SessionError(f"{key}.channels: character {character.name!r} has no target "
+                                   f"{target!r}; expected one of "
+                                   f"{', '.join(sorted(target_names))}")
+            previous = owner.get(target)
+            if previous is not None and previous[0] != action.performer:
+                raise SessionError(
+                    f"{key}.channels: target {target!r} of character {character.name!r} is "
+                    f"already driven by performer {previous[0]!r} (actions[{previous[1]}]); "
+                    f"expected each performer on its own channels")
+            owner.setdefault(target, (action.performer, index))
+        start = motion.sample(0.0)
+        performer_rest = rest.setdefault(action.performer, {})
+        for channel, target in channels:
+            performer_rest.setdefault(target, start[channel])
+        by_performer.setdefault(action.performer, {})[action.take] = (motion, tuple(channels))
+    return [Track(performer, motions, rest[performer], blend=config.blend)
+            for performer, motions in by_performer.items()]
+
+
+def _outputs(config: SessionConfig, overrides: Overrides) -> list:
+    from .outputs import OscOutput, PngOutput, VideoOutput
+    outputs = []
+    video = overrides.video or config.outputs.video
+    if video:
+        background = (config.background_colour if config.background is not
+                      Background.TRANSPARENT else (0, 0, 0))
+        outputs.append(VideoOutput(video, fps=config.fps, size=config.size,
+                                   background=background))
+    png = overrides.png or config.outputs.png
+    if png:
+        outputs.append(PngOutput(png, fps=config.fps, size=config.size))
+    osc = overrides.osc or config.outputs.osc
+    if osc:
+        outputs.append(OscOutput(*osc))
+    # --preview 0 asks for any free port; in a session file 0 means no preview
+    preview = overrides.preview if overrides.preview is not None else config.outputs.preview
+    if preview is not None:
+        from .preview import PreviewOutput
+        outputs.append(PreviewOutput(host=overrides.preview_host or config.outputs.preview_host,
+                                     port=preview))
+    return outputs

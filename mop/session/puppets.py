@@ -1,0 +1,228 @@
+"""Characters of a session: build each puppet kind from its asset, and its layer renderer.
+
+A layer renderer has `render(puppet) -> (h, w, 4) uint8 RGBA` (straight alpha) and `close()`;
+its height is the character's `scale` x the frame height, its width follows the character.
+
+Per-kind options (`[characters.NAME.options]` in the session file):
+
+- image: `pins = {name = [x, y]}` driven pins and `anchors = {name = [x, y]}` fixed ones, in
+  picture pixels (default: the picture's `NAME.pins.json` beside it, if any); `cell_size` [px], `mode` ("springs" | "arap"); `material` is the image
+  puppet's ("liquid", "fabric", "rubber", "rigid").
+- latex: anything `LatexPuppet.from_mesh` accepts (e.g. `masses`, `materials` = one preset per
+  layer); the asset "froggy" is the shipped frog head (`LatexPuppet.froggy`).
+- medial: `joints` (a joints JSON path or the list of cuts), `constraint`; `material` is a
+  medial preset ("thick skin", "water", "plastic", "skin", "tight cloth").
+- all 3D kinds: `camera` = "front" | "three_quarter" | "side" | "top" | "below" (the
+  direction the character is seen from; default "three_quarter").
+"""
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+
+import numpy as np
+
+from .config import CharacterConfig, CharacterKind, SessionError
+
+log = logging.getLogger(__name__)
+
+LAYER_MARGIN = 0.12   # free border around a character in its layer [fraction of its size]
+
+
+def data_folder() -> Path:
+    import characters
+    return Path(characters.__file__).resolve().parent / "data"
+
+
+def resolve_asset(character: CharacterConfig, suffixes: tuple[str, ...]) -> Path:
+    """A path as given, or a file shipped in characters/data/ named `asset` + a known suffix."""
+    path = Path(character.asset)
+    if path.exists():
+        return path
+    folder = data_folder()
+    candidates = [folder / f"{character.asset}{suffix}" for suffix in suffixes]
+    candidates += [folder / character.asset / f"{character.asset}{suffix}" for suffix in suffixes]
+    for candidate in candidates:
+        if candidate.exists():
+            return candidate
+    shipped = sorted(p.name for p in folder.iterdir()) if folder.is_dir() else []
+    raise SessionError(
+        f"characters.{character.name}.asset: no file {character.asset!r} and no shipped asset of "
+        f"that name with {', '.join(suffixes)} in {folder} (it has {', '.join(shipped) or 'none'})")
+
+
+def _option(character: CharacterConfig, name: str, kind, default=None):
+    value = character.options.get(name, default)
+    if value is not None and not isinstance(value, kind):
+        raise SessionError(f"characters.{character.name}.options.{name}: expected "
+                           f"{getattr(kind, '__name__', kind)}, got {value!r}")
+    return value
+
+
+def _points(character: CharacterConfig, name: str) -> dict[str, tuple[float, float]]:
+    table = _option(character, name, dict, {})
+    points = {}
+    for key, value in table.items():
+        if (not isinstance(value, list) or len(value) != 2
+                or not all(isinstance(v, (int, float)) for v in value)):
+            raise SessionError(f"characters.{character.name}.options.{name}.{key}: expected "
+                               f"[x, y] in picture pixels, got {value!r}")
+        points[key] = (float(value[0]), float(value[1]))
+    return points
+
+
+def build(character: CharacterConfig, *, frame_height: int):
+    """(puppet, layer renderer) for one character."""
+    height = max(8, int(round(character.scale * frame_height)))
+    if character.kind is CharacterKind.IMAGE:
+        return _image(character, height)
+    if character.kind is CharacterKind.LATEX:
+        return _latex(character, height)
+    return _medial(character, height)
+
+
+# 2D image puppets ----------------------------------------------------------------------------
+
+def _image(character: CharacterConfig, height: int):
+    from characters import ImagePuppet
+    path = resolve_asset(character, (".png", ".jpg", ".jpeg", ".webp"))
+    known = {"pins", "anchors", "cell_size", "mode"}
+    unknown = set(character.options) - known
+    if unknown:
+        raise SessionError(f"characters.{character.name}.options.{sorted(unknown)[0]}: unknown "
+                           f"option for an image character; expected one of "
+                           f"{', '.join(sorted(known))}")
+    options = {}
+    if character.material:
+        options["material"] = character.material
+    if "cell_size" in character.options:
+        options["cell_size"] = float(_option(character, "cell_size", (int, float)))
+    if "mode" in character.options:
+        options["mode"] = _option(character, "mode", str)
+    puppet = ImagePuppet.from_image(str(path), **options)
+    pins, anchors = _points(character, "pins"), _points(character, "anchors")
+    sidecar = path.with_name(path.stem + ".pins.json")
+    if not pins and not anchors and sidecar.exists():
+        pins, anchors = read_pins(sidecar)
+    for name, xy in pins.items():
+        puppet.add_pin(xy, name=name)
+    for name, xy in anchors.items():
+        puppet.add_pin(xy, name=name, fixed=True)
+    return puppet, ImageLayer(puppet, height=height)
+
+
+def read_pins(path: Path) -> tuple[dict, dict]:
+    """({driven pin: (x, y)}, {anchor: (x, y)}) from a shipped `NAME.pins.json`
+    ({"format": "mop.pins", "pins": {name: {"xy": [x, y], "fixed": bool}}})."""
+    import json
+    document = json.loads(Path(path).read_text())
+    if document.get("format") != "mop.pins" or not isinstance(document.get("pins"), dict):
+        raise ValueError(f"{path}: expected a mop.pins document with a 'pins' table")
+    pins, anchors = {}, {}
+    for name, pin in document["pins"].items():
+        xy = tuple(float(v) for v in pin["xy"])
+        (anchors if pin.get("fixed") else pins)[name] = xy
+    return pins, anchors
+
+
+class ImageLayer:
+    """An image puppet drawn into its own layer by `mop.render.image2d.ImageRenderer`: the rest
+    mesh's bounding box plus a margin fills the layer height."""
+
+    def __init__(self, puppet, *, height: int, margin: float = LAYER_MARGIN):
+        from mop.render.image2d import ImageRenderer
+        low, high = puppet.vertices.min(0), puppet.vertices.max(0)
+        span = high - low
+        self.scale = height / (span[1] * (1 + 2 * margin))
+        width = int(round(span[0] * (1 + 2 * margin) * self.scale))
+        width += width % 2
+        self.offset = (low + high) / 2
+        self.centre = np.array([width / 2, height / 2])
+        self.renderer = ImageRenderer(np.ascontiguousarray(puppet.image), puppet.vertices,
+                                      puppet.triangles, size=(width, height),
+                                      background="transparent")
+        self.frame = np.zeros((height, width, 4), np.uint8)
+        self._xy = np.empty_like(puppet.vertices)
+
+    def render(self, puppet) -> np.ndarray:
+        xy = self._xy
+        np.subtract(puppet.state.x, self.offset, out=xy)
+        xy *= self.scale
+        xy += self.centre
+        return self.renderer.render_into(xy, self.frame)
+
+    def close(self) -> None:
+        pass
+
+
+# 3D puppets -----------------------------------------------------------------------------------
+
+class SceneLayer:
+    """A 3D puppet drawn by `mop.render.scene3d.Scene3D` (pyrender, offscreen) into its own
+    square transparent layer; the scene is built once and only vertices change per frame."""
+
+    def __init__(self, puppet, *, height: int, colour=None, camera: str = "three_quarter"):
+        from mop.render.scene3d import Look, Scene3D
+        size = int(height) + int(height) % 2
+        self.scene = Scene3D(size=(size, size), camera=camera, background="transparent")
+        if colour is not None and getattr(puppet, "vertex_colors", None) is None:
+            look = Look(tuple(c / 255.0 for c in colour), roughness=0.45,
+                        use_vertex_colors=False)
+        else:
+            look = "latex"
+        self.scene.add(puppet, look=look)
+
+    def render(self, puppet) -> np.ndarray:
+        self.scene.update()
+        return self.scene.render()
+
+    def close(self) -> None:
+        try:
+            self.scene.close()
+        except Exception as error:
+            # pyrender's EGL teardown terminates the display shared by every scene of the
+            # process, so after the first scene closes the others cannot make their context
+            # current any more; their resources went with the display.
+            if type(error).__name__ != "GLError":
+                raise
+            log.debug("3D layer closed after the EGL display was terminated: %s", error)
+
+
+def _mesh_layer(character: CharacterConfig, puppet, height: int, colour):
+    camera = _option(character, "camera", str, "three_quarter")
+    return SceneLayer(puppet, height=height, colour=colour, camera=camera)
+
+
+def _latex(character: CharacterConfig, height: int):
+    from characters import LatexPuppet
+    options = {k: v for k, v in character.options.items() if k != "camera"}
+    if character.material:
+        raise SessionError(f"characters.{character.name}.material: a latex puppet has one "
+                           f"material per layer; give options.materials = [skin, foam, cavity] "
+                           f"instead")
+    if character.asset == "froggy" and not Path(character.asset).exists():
+        puppet = LatexPuppet.froggy(**options)        # the shipped frog head
+    else:
+        path = resolve_asset(character, (".ply", ".obj", ".stl", ".off", ".glb"))
+        puppet = LatexPuppet.from_mesh(str(path), **options)
+    return puppet, _mesh_layer(character, puppet, height, character.colour)
+
+
+def _medial(character: CharacterConfig, height: int):
+    from characters import MedialObject
+    options = {k: v for k, v in character.options.items() if k != "camera"}
+    if character.material:
+        options["material"] = character.material
+    path = resolve_asset(character, (".obj", ".ply", ".stl", ".off", ".glb"))
+    joints = options.get("joints")
+    if isinstance(joints, str) and not Path(joints).is_absolute():
+        for base in (path.parent, data_folder()):
+            if (base / joints).exists():
+                options["joints"] = str(base / joints)
+                break
+    elif joints is None:
+        sidecar = path.with_name(path.stem + ".joints.json")
+        if sidecar.exists():
+            options["joints"] = str(sidecar)
+    puppet = MedialObject.from_mesh(str(path), **options)
+    return puppet, _mesh_layer(character, puppet, height, character.colour or (206, 120, 160))

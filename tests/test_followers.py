@@ -1,0 +1,379 @@
+"""The follower's forward algorithm against slow obvious references and hmmlearn, its numerics
+on hostile input, its input validation, and the bank's decisions on synthetic actions."""
+import math
+import tracemalloc
+
+import numpy as np
+import pytest
+
+from followers import (BankOutput, Follower, FollowerBank, FollowerOutput, time_warp,
+                       transition_model)
+
+hmmc = pytest.importorskip("hmmlearn._hmmc")
+
+
+# ---- slow, obvious references -------------------------------------------------------------------
+
+def gaussian_log_emission(template, X, sigma):
+    """(N, T) log N(x_n; template_j, diag sigma^2), NaN channels left out."""
+    sigma = np.broadcast_to(np.asarray(sigma, dtype=float), template.shape)
+    out = np.zeros((X.shape[0], template.shape[0]))
+    for n, x in enumerate(X):
+        for j in range(template.shape[0]):
+            total = 0.0
+            for d in range(template.shape[1]):
+                if np.isnan(x[d]):
+                    continue
+                z = (x[d] - template[j, d]) / sigma[j, d]
+                total += -0.5 * z * z - 0.5 * math.log(2 * math.pi * sigma[j, d] ** 2)
+            out[n, j] = total
+    return out
+
+
+def mop_reference(template, X, sigma, window):
+    """MOP equations 2-7 written out: windowed forward, 0.5/0.5 chain, last state absorbing.
+    Returns progress, variance (in [0, 1] units) and cumulative log-likelihood, each (N,)."""
+    T = template.shape[0]
+    logb = gaussian_log_emission(template, X, sigma)
+    states = np.arange(T)
+    alpha = None
+    mu = 0.0
+    loglik = 0.0
+    out = np.zeros((X.shape[0], 3))
+    for n in range(X.shape[0]):
+        if alpha is None:
+            predicted = np.zeros(T)
+            predicted[0] = 1.0  # pi: everything on the first state (equation 5)
+        else:
+            centre = int(math.floor(mu + 0.5))  # equation 7, 0-based
+            lo, hi = centre - window, centre + window
+            if lo < 0:
+                lo, hi = 0, min(T - 1, 2 * window)
+            elif hi > T - 1:
+                lo, hi = max(0, T - 1 - 2 * window), T - 1
+            source = np.zeros(T)
+            source[lo:hi + 1] = alpha[lo:hi + 1]
+            predicted = 0.5 * source  # a_ii = 0.5
+            predicted[1:] += 0.5 * source[:-1]  # a_i,i+1 = 0.5
+            predicted[-1] += 0.5 * source[-1]  # the last state is absorbing
+        top = logb[n].max()
+        unnormalised = predicted * np.exp(logb[n] - top)  # equation 6 before k
+        total = unnormalised.sum()
+        loglik += math.log(total) + top
+        alpha = unnormalised / total  # k
+        mu = float(alpha @ states)  # equation 3
+        var = float(alpha @ (states - mu) ** 2)  # equation 4
+        out[n] = (mu / (T - 1), var / (T - 1) ** 2, loglik)
+    return out[:, 0], out[:, 1], out[:, 2]
+
+
+def forward_moments(log_start, transmat, log_emission, positions, scale):
+    """hmmlearn's forward pass -> progress, variance, cumulative log-likelihood."""
+    _, fwd = hmmc.forward_log(np.exp(log_start), transmat, log_emission)
+    top = fwd.max(axis=1, keepdims=True)
+    post = np.exp(fwd - top)
+    total = post.sum(axis=1, keepdims=True)
+    loglik = (np.log(total) + top)[:, 0]
+    post /= total
+    mu = post @ positions
+    var = post @ positions ** 2 - mu ** 2
+    return mu / scale, var / scale ** 2, loglik
+
+
+def random_template(rng, T, D, *, scale=1.0):
+    steps = rng.normal(size=(T + 10, D))
+    kernel = np.ones(10) / 10
+    smooth = np.stack([np.convolve(steps[:, d], kernel, "valid") for d in range(D)], axis=1)
+    return np.cumsum(smooth, axis=0)[:T] * scale
+
+
+def mop_performance(rng, template, frames, *, speed=0.45, noise=0.3):
+    idx = np.clip((np.arange(frames) * speed).astype(int), 0, template.shape[0] - 1)
+    return template[idx] + rng.normal(scale=noise, size=(frames, template.shape[1]))
+
+
+# ---- MOP mode: the paper to the letter ----------------------------------------------------------
+
+@pytest.mark.parametrize("window", [3, 7, 100])
+def test_mop_matches_slow_reference(rng, window):
+    T, D = 40, 3
+    template = random_template(rng, T, D)
+    X = mop_performance(rng, template, 90)
+    X[10, 1] = np.nan  # a missing channel is left out of that frame's emission
+    X[20] = np.nan  # an all-NaN frame only predicts
+    sigma = np.array([0.8, 1.0, 1.3])
+    trace = Follower(template, sigma=sigma, window=window, transitions="mop").follow(X)
+    progress, variance, loglik = mop_reference(template, X, sigma, window)
+    np.testing.assert_allclose(trace.progress, progress, atol=1e-10)
+    np.testing.assert_allclose(trace.variance, variance, atol=1e-10)
+    np.testing.assert_allclose(trace.log_likelihood, loglik, rtol=1e-10)
+
+
+def test_mop_full_window_matches_hmmlearn_forward(rng):
+    T, D = 60, 4
+    template = random_template(rng, T, D)
+    X = mop_performance(rng, template, 150)
+    sigma = 0.7
+    transmat = np.zeros((T, T))
+    for i in range(T - 1):
+        transmat[i, i] = transmat[i, i + 1] = 0.5
+    transmat[-1, -1] = 1.0
+    start = np.full(T, -np.inf)
+    start[0] = 0.0
+    logb = gaussian_log_emission(template, X, sigma)
+    progress, variance, loglik = forward_moments(start, transmat, logb, np.arange(T), T - 1)
+    trace = Follower(template, sigma=sigma, window=T, transitions="mop").follow(X)
+    np.testing.assert_allclose(trace.progress, progress, atol=1e-9)
+    np.testing.assert_allclose(trace.variance, variance, atol=1e-9)
+    np.testing.assert_allclose(trace.log_likelihood, loglik, rtol=1e-10)
+
+
+def test_speed_transitions_match_dense_hmm(rng):
+    """The speed model's kernel equals a dense HMM over (state, speed level) run by hmmlearn
+    (restart off and a full window, so nothing is truncated; pruning drops < 1e-8)."""
+    T, D = 25, 2
+    template = random_template(rng, T, D)
+    model = transition_model("speed", restart=0.0, levels=4, resolution=1)
+    M = model.levels
+    A = model.max_advance
+    X = template[np.clip(np.round(np.arange(30) * 1.3).astype(int), 0, T - 1)]
+    X = X + rng.normal(scale=0.2, size=X.shape)
+    X[5, 0] = np.nan
+    sigma = 0.5
+    follower = Follower(template, sigma=sigma, window=T, transitions=model)
+    trace = follower.follow(X)
+
+    n = T * M
+    dense = np.zeros((n, n))
+    for i in range(T):
+        for m in range(M):
+            for delta, p_change in zip((-1, 0, 1), model.speed_change[m]):
+                m2 = m + delta
+                if p_change == 0.0:
+                    continue
+                for a in range(A + 1):
+                    j = min(i + a, T - 1)
+                    dense[i * M + m, j * M + m2] += p_change * model.advance[m2, a]
+    start = np.full(n, -np.inf)
+    start[:M] = np.log(model.initial_speed)
+    logb = np.repeat(gaussian_log_emission(template, X, sigma), M, axis=1)
+    positions = np.repeat(np.arange(T), M).astype(float)
+    progress, variance, loglik = forward_moments(start, dense, logb, positions, T - 1)
+    np.testing.assert_allclose(trace.progress, progress, atol=1e-6)
+    np.testing.assert_allclose(trace.variance, variance, atol=1e-6)
+    np.testing.assert_allclose(trace.log_likelihood, loglik, rtol=1e-6)
+
+
+def test_step_equals_follow_and_reset_starts_over(rng):
+    template = random_template(rng, 50, 3)
+    X, _ = time_warp(template, 1.3)
+    follower = Follower(template)
+    trace = follower.follow(X)
+    follower.reset()
+    outs = [follower.step(x) for x in X]
+    assert all(isinstance(o, FollowerOutput) for o in outs)
+    np.testing.assert_allclose([o.progress for o in outs], trace.progress, atol=1e-12)
+    np.testing.assert_allclose([o.log_likelihood for o in outs], trace.log_likelihood,
+                               rtol=1e-12)
+    again = follower.follow(X)  # follow() resets first
+    np.testing.assert_array_equal(again.progress, trace.progress)
+
+
+# ---- numerics on hostile input -----------------------------------------------------------------
+
+def test_missing_channel_equals_follower_without_it(rng):
+    template = random_template(rng, 40, 3)
+    X, _ = time_warp(template, 0.8)
+    X = X + rng.normal(scale=0.1, size=X.shape)
+    X[:, 2] = np.nan
+    sigma = np.array([0.5, 0.6, 0.7])
+    for kind in ("mop", "speed"):
+        full = Follower(template, sigma=sigma, transitions=kind).follow(X)
+        reduced = Follower(template[:, :2], sigma=sigma[:2], transitions=kind).follow(X[:, :2])
+        np.testing.assert_allclose(full.progress, reduced.progress, atol=1e-12)
+        np.testing.assert_allclose(full.log_likelihood, reduced.log_likelihood, rtol=1e-12)
+
+
+def test_all_nan_frame_only_predicts(rng):
+    template = random_template(rng, 30, 2)
+    follower = Follower(template, sigma=0.5, window=30, transitions="mop")
+    for x in template[:6]:
+        before = follower.step(x)
+    after = follower.step(np.full(2, np.nan))
+    # the 0.5/0.5 chain moves the mean by half a state; nothing is learned from the frame
+    assert after.progress == pytest.approx(before.progress + 0.5 / 29, abs=1e-12)
+    assert after.log_likelihood == pytest.approx(before.log_likelihood, abs=1e-12)
+    assert after.variance > before.variance
+
+
+def test_a_million_hostile_frames_give_finite_output(rng):
+    template = random_template(rng, 40, 4)
+    N = 1_000_000
+    X = rng.normal(size=(N, 4)) * 3
+    kind = rng.integers(0, 8, size=(N, 4))
+    X[kind == 1] = np.nan
+    X[kind == 2] = np.inf
+    X[kind == 3] = -np.inf
+    X[kind == 4] = 1e300 * rng.choice([-1, 1], size=(kind == 4).sum())
+    X[kind == 5] = np.finfo(float).max
+    X[rng.random(N) < 0.05] = np.nan  # whole frames missing too
+    for transitions in ("speed", "mop"):
+        trace = Follower(template, transitions=transitions).follow(X[: N if transitions ==
+                                                                      "speed" else N // 4])
+        for values in (trace.progress, trace.variance, trace.log_likelihood):
+            assert np.isfinite(values).all()
+        assert trace.progress.min() >= 0.0 and trace.progress.max() <= 1.0
+        assert trace.variance.min() >= 0.0
+
+
+def test_long_run_does_not_underflow(rng):
+    """Two hundred thousand frames of a template performed over and over: the likelihood keeps
+    falling linearly (no underflow to -inf, no stall) and the follower still tracks."""
+    template = random_template(rng, 60, 3)
+    one, truth = time_warp(template, 1.0)
+    reps = 3000
+    X = np.tile(one, (reps, 1)) + rng.normal(scale=0.05, size=(reps * len(one), 3))
+    trace = Follower(template).follow(X)
+    assert np.isfinite(trace.log_likelihood).all()
+    last = trace.progress[-len(one):]
+    assert np.median(np.abs(last - truth)) < 0.03
+
+
+def test_progress_saturates_and_a_new_repetition_starts_afresh(rng):
+    template = random_template(rng, 80, 3, scale=2.0)
+    performance, truth = time_warp(template, 1.2, hold=40)
+    twice = np.vstack([performance, performance])
+    trace = Follower(template).follow(twice)
+    n = len(performance)
+    held = trace.progress[n - 40:n]
+    assert held.min() > 0.97  # saturated at the end, no bounce back
+    assert np.all(np.diff(held) > -0.01)
+    second = trace.progress[n:]
+    # the second repetition is picked up from its start and followed
+    assert second[5:15].max() < 0.25
+    assert np.median(np.abs(second - truth)[10:]) < 0.03
+
+
+def test_speed_model_follows_twice_as_fast_where_mop_cannot(rng):
+    template = random_template(rng, 120, 3, scale=2.0)
+    performance, truth = time_warp(template, 2.0)
+    performance = performance + rng.normal(scale=0.05, size=performance.shape)
+    speed = Follower(template).follow(performance)
+    mop = Follower(template, transitions="mop").follow(performance)
+    assert np.median(np.abs(speed.progress - truth)) < 0.02
+    assert speed.progress[-1] > 0.97
+    assert mop.progress[-1] < 0.6  # the 0.5/0.5 chain advances at most one state per frame
+
+
+# ---- validation ---------------------------------------------------------------------------------
+
+def test_wrong_dimension_frame_names_expected_and_given(rng):
+    follower = Follower(random_template(rng, 20, 3))
+    with pytest.raises(ValueError, match=r"3 channel.*got shape \(4,\)"):
+        follower.step(np.zeros(4))
+    bank = FollowerBank({"a": random_template(rng, 20, 3), "b": random_template(rng, 25, 3)})
+    with pytest.raises(ValueError, match=r"3 channel.*got shape \(2,\)"):
+        bank.step(np.zeros(2))
+    with pytest.raises(ValueError, match=r"\(N, 3\).*\(10, 5\)"):
+        follower.follow(np.zeros((10, 5)))
+
+
+@pytest.mark.parametrize("kwargs, match", [
+    ({"sigma": -1.0}, "sigma must be finite and > 0"),
+    ({"sigma": np.ones(5)}, r"one value per channel \(3,\)"),
+    ({"window": 0}, "window must be >= 1"),
+    ({"transitions": "fast"}, "transitions must be one of"),
+    ({"outlier_sigmas": 0.0}, "outlier_sigmas must be > 0"),
+])
+def test_bad_parameters_raise_clear_errors(rng, kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        Follower(random_template(rng, 20, 3), **kwargs)
+
+
+def test_bad_templates_raise_clear_errors():
+    with pytest.raises(ValueError, match="at least 2 frames"):
+        Follower(np.zeros((1, 3)))
+    with pytest.raises(ValueError, match="non-finite values in 1 frame"):
+        Follower(np.array([[0.0, 1.0], [np.nan, 2.0], [1.0, 2.0]]))
+    with pytest.raises(TypeError, match="numeric array"):
+        Follower(np.array([["a", "b"], ["c", "d"]]))
+    with pytest.raises(ValueError, match="same channels"):
+        FollowerBank({"a": np.zeros((5, 2)), "b": np.zeros((5, 3))})
+    with pytest.raises(TypeError, match="names must be str"):
+        FollowerBank({1: np.zeros((5, 2))})
+
+
+# ---- the bank on synthetic actions --------------------------------------------------------------
+
+@pytest.fixture
+def actions(rng):
+    # each action starts from its own pose (otherwise no one could tell them apart at first)
+    return {name: random_template(rng, 90, 4, scale=1.5) + rng.normal(scale=3.0, size=4)
+            for name in ("wave", "nod", "clap")}
+
+
+def test_bank_recognises_switches_quickly_without_flicker(rng, actions):
+    bank = FollowerBank(actions)
+    wave, _ = time_warp(actions["wave"], 1.5)
+    clap, clap_truth = time_warp(actions["clap"], 0.7)
+    X = np.vstack([wave, clap]) + rng.normal(scale=0.1, size=(len(wave) + len(clap), 4))
+    trace = bank.follow(X)
+    names = np.array(bank.actions + (None,), dtype=object)
+    said = names[trace["action"]]
+    # wave recognised within a few frames and held without flicker until the switch
+    assert all(a == "wave" for a in said[8:len(wave)])
+    # the switch to clap followed within 10 frames (0.4 s at 25 fps), then held
+    assert all(a == "clap" for a in said[len(wave) + 10:])
+    assert np.count_nonzero(said[1:] != said[:-1]) <= 3
+    # the clap follower caught the new action from its start
+    progress = trace["progresses"][len(wave):, bank.actions.index("clap")]
+    assert np.median(np.abs(progress - clap_truth)[10:]) < 0.03
+
+
+def test_bank_output_is_reused_documented_and_copyable(rng, actions):
+    bank = FollowerBank(actions)
+    x = np.ascontiguousarray(actions["nod"][0])
+    first = bank.step(x)
+    snapshot = first.copy()
+    second = bank.step(np.ascontiguousarray(actions["nod"][1]))
+    assert second is first and isinstance(first, BankOutput)
+    assert snapshot is not first
+    assert set(first.posterior) == set(bank.actions)
+    assert sum(first.posterior.values()) == pytest.approx(1.0)
+    assert set(first.log_likelihoods) == set(bank.actions)
+    assert bank.progresses.shape == bank.posteriors.shape == (3,)
+
+
+def test_bank_step_does_not_grow_memory(actions, rng):
+    bank = FollowerBank(actions)
+    X = np.ascontiguousarray(np.vstack([actions["wave"]] * 3))
+    for x in X[:50]:
+        bank.step(x)
+    tracemalloc.start()
+    before = tracemalloc.take_snapshot()
+    for x in X[50:]:
+        bank.step(x)
+    after = tracemalloc.take_snapshot()
+    tracemalloc.stop()
+    grown = sum(stat.size_diff for stat in after.compare_to(before, "filename"))
+    assert grown < 20_000, f"bank.step kept {grown} bytes over {len(X) - 50} frames"
+
+
+def test_bank_rejects_what_no_template_explains(rng, actions):
+    bank = FollowerBank(actions)
+    stranger = random_template(rng, 150, 4, scale=1.5)
+    trace = bank.follow(stranger)
+    assert np.mean(trace["action"][20:] == -1) > 0.9
+    known = bank.follow(time_warp(actions["nod"], 1.0)[0])
+    assert np.mean(known["action"][10:] == bank.actions.index("nod")) > 0.95
+
+
+def test_bank_survives_hostile_frames(rng, actions):
+    bank = FollowerBank(actions)
+    X = rng.normal(size=(20000, 4))
+    X[rng.random(X.shape) < 0.2] = np.nan
+    X[rng.random(X.shape) < 0.05] = np.inf
+    X[rng.random(X.shape) < 0.05] = -1e308
+    trace = bank.follow(X)
+    for key in ("progress", "variance", "progresses", "posteriors", "log_likelihoods", "fits"):
+        assert np.isfinite(trace[key]).all(), key

@@ -1,0 +1,137 @@
+"""Session files: defaults + overlay into frozen objects; every error names the file and key."""
+import dataclasses
+import textwrap
+
+import pytest
+
+from mop.session.config import (Background, CharacterKind, Normalise, SessionError,
+                                load_session, parse_session)
+
+GOOD = """
+[session]
+fps = 50
+blend = 0.25
+takes = "takes.sqlite"
+background = "chroma"
+
+[performers.left]
+source = "replay:left_show"
+channels = ["thumb", "index"]
+normalise = "range"
+
+[performers.right]
+source = "osc:127.0.0.1:9000/hand"
+
+[characters.frog]
+kind = "latex"
+asset = "froggy"
+position = [0.25, 0.5]
+
+[characters.cat]
+kind = "image"
+asset = "cat.png"
+colour = "#ff8800"
+
+[[actions]]
+take = "open"
+performer = "left"
+character = "frog"
+
+[[actions]]
+take = "wave"
+performer = "right"
+character = "cat"
+channels = { hand = "paw" }
+
+[[actions]]
+take = "nod"
+performer = "left"
+character = "cat"
+channels = ["head"]
+
+[outputs]
+video = "out/show.mp4"
+osc = "127.0.0.1:9100"
+preview = 8765
+"""
+
+
+def write(tmp_path, text, name="show.toml"):
+    path = tmp_path / name
+    path.write_text(textwrap.dedent(text))
+    return path
+
+
+def test_good_file_is_parsed_into_frozen_typed_objects(tmp_path):
+    config = load_session(write(tmp_path, GOOD))
+    assert config.fps == 50 and config.blend == 0.25 and config.size == (960, 540)
+    assert config.background is Background.CHROMA and config.background_colour == (0, 177, 64)
+    assert config.takes == (tmp_path / "takes.sqlite").resolve()
+    left, right = config.performers
+    assert left.channels == ("thumb", "index") and left.normalise is Normalise.RANGE
+    assert right.channels == () and right.normalise is Normalise.ZSCORE  # from the defaults
+    frog, cat = config.characters
+    assert frog.kind is CharacterKind.LATEX and frog.position == (0.25, 0.5)
+    assert cat.position == (0.5, 0.5) and cat.colour == (255, 136, 0)
+    assert config.actions[1].channels == (("hand", "paw"),)
+    assert config.actions[2].channels == (("head", "head"),)
+    assert [a.take for a in config.actions_of("left")] == ["open", "nod"]
+    assert config.outputs.osc == ("127.0.0.1", 9100) and config.outputs.preview == 8765
+    assert config.outputs.video == str((tmp_path / "out/show.mp4").resolve())
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        config.fps = 25
+    with pytest.raises(TypeError):
+        frog.options["x"] = 1
+
+
+@pytest.mark.parametrize("old, new, key, expected", [
+    ('fps = 50', 'fps = 24', "session.fps", "one of 25, 30, 50, 60"),
+    ('fps = 50', 'fps = "50"', "session.fps", "an integer"),
+    ('blend = 0.25', 'blend = -1.0', "session.blend", "a number in [0, 10]"),
+    ('kind = "latex"', 'kind = "lattex"', "characters.frog.kind", "one of 'image', 'latex'"),
+    ('position = [0.25, 0.5]', 'position = [0.25]', "characters.frog.position",
+     "a list of 2 numbers"),
+    ('colour = "#ff8800"', 'colour = "orange"', "characters.cat.colour", "a colour '#rrggbb'"),
+    ('normalise = "range"', 'normalise = "minmax"', "performers.left.normalise",
+     "one of 'none', 'zscore', 'range'"),
+    ('channels = ["thumb", "index"]', 'channels = "thumb"', "performers.left.channels",
+     "a list of channel names"),
+    ('source = "osc:127.0.0.1:9000/hand"', 'sauce = "osc:x"', "performers.right.sauce",
+     "unknown key"),
+    ('performer = "right"', 'performer = "middle"', "actions[1].performer",
+     "one of the performers 'left', 'right'"),
+    ('character = "frog"', 'character = "toad"', "actions[0].character",
+     "one of the characters"),
+    ('osc = "127.0.0.1:9100"', 'osc = "localhost"', "outputs.osc", "'host:port'"),
+    ('video = "out/show.mp4"', 'video = "out/show.mov"', "outputs.video", ".mp4, .mkv, .gif"),
+    ('take = "open"', 'tak = "open"', "actions[0].tak", "unknown key"),
+    ('channels = { hand = "paw" }', 'channels = ["head"]', "actions[2].channels",
+     "already driven by performer 'right'"),
+])
+def test_malformed_file_names_file_key_and_expectation(tmp_path, old, new, key, expected):
+    assert old in GOOD
+    path = write(tmp_path, GOOD.replace(old, new, 1))
+    with pytest.raises(SessionError) as caught:
+        load_session(path)
+    message = str(caught.value)
+    assert message.startswith(f"{path}: {key}")
+    assert expected in message
+
+
+def test_missing_required_keys_and_tables(tmp_path):
+    without_kind = GOOD.replace('kind = "latex"\n', "")
+    with pytest.raises(SessionError, match=r"characters\.frog\.kind: expected one of .*required"):
+        load_session(write(tmp_path, without_kind))
+    with pytest.raises(SessionError, match=r"performers: expected at least one"):
+        parse_session({"session": {"takes": "x"}, "characters": {}, "actions": []})
+    with pytest.raises(SessionError, match=r"^show.toml: actions: expected at least one"):
+        parse_session({"performers": {"a": {"source": "replay:x"}},
+                       "characters": {"c": {"kind": "image", "asset": "a.png"}}},
+                      where="show.toml")
+
+
+def test_not_toml_and_missing_file(tmp_path):
+    with pytest.raises(SessionError, match=r"show.toml: not valid TOML"):
+        load_session(write(tmp_path, "[session\nfps = 25"))
+    with pytest.raises(FileNotFoundError, match="session file not found"):
+        load_session(tmp_path / "nowhere.toml")

@@ -1,0 +1,218 @@
+"""The session loop's parts: blending, channel selection, feeds, stage composition."""
+import math
+
+import numpy as np
+import pytest
+
+from characters import Motion
+from mop.render.compose import Stage, blend_over
+from mop.session.feeds import ENDED, FAILED, OK, SILENT, SourceFeed, TakeFeed
+from mop.session.loop import FollowState, PerformerRuntime, Track, smoothstep
+
+
+def ramp(name, start, end, duration=2.0):
+    return Motion({name: ([0.0, duration], [[start], [end]])})
+
+
+def test_smoothstep_ends_and_middle():
+    assert smoothstep(-1) == 0 and smoothstep(0) == 0 and smoothstep(1) == 1 and smoothstep(3) == 1
+    assert smoothstep(0.5) == pytest.approx(0.5)
+    assert smoothstep(0.25) == pytest.approx(0.25 ** 2 * (3 - 0.5))
+
+
+def test_track_cross_fades_between_actions_then_plays_the_new_one():
+    a, b = ramp("bend", 0.0, 1.0), ramp("bend", 10.0, 20.0)
+    track = Track("p", {"a": (a, (("bend", "finger"),)), "b": (b, (("bend", "finger"),))},
+                  {"finger": [0.0]}, blend=0.4)
+    out = {}
+    track.update(0.0, FollowState(action="a", progress=0.5), out)
+    # from nothing to "a": no previous targets, so the new motion plays at once
+    assert out["finger"] == pytest.approx([0.5])
+    track.update(1.0, FollowState(action="a", progress=0.75), out)
+    assert out["finger"] == pytest.approx([0.75])
+    # switch to "b" at t = 1.0: the fade starts from what "a" last gave (0.75)
+    for t, progress in [(1.0, 0.0), (1.1, 0.1), (1.2, 0.2), (1.3, 0.3), (1.4, 0.4), (1.8, 0.5)]:
+        out.clear()
+        track.update(t, FollowState(action="b", progress=progress), out)
+        goal = 10.0 + 10.0 * progress
+        w = smoothstep((t - 1.0) / 0.4)
+        assert out["finger"] == pytest.approx([(1 - w) * 0.75 + w * goal]), t
+    assert track.current == "b" and track.weight == 1.0
+
+
+def test_track_relaxes_to_rest_then_lets_go_and_ignores_foreign_actions():
+    a = Motion({"hand": ([0.0, 1.0], [[5.0, 5.0], [9.0, 1.0]])})
+    track = Track("p", {"a": (a, (("hand", "paw"),))}, {"paw": [5.0, 5.0]}, blend=0.5)
+    out = {}
+    track.update(0.0, FollowState(action="a", progress=1.0), out)
+    assert out["paw"] == pytest.approx([9.0, 1.0])
+    # an action this track does not know (it drives another character) = rest here
+    out.clear()
+    track.update(0.25, FollowState(action="somebody_else", progress=0.3), out)
+    assert out["paw"] == pytest.approx([9.0, 1.0])       # the fade starts where it was
+    out.clear()
+    track.update(0.5, FollowState(action=None), out)
+    w = smoothstep(0.5)
+    assert out["paw"] == pytest.approx((1 - w) * np.array([9.0, 1.0]) + w * np.array([5.0, 5.0]))
+    out.clear()
+    track.update(0.8, FollowState(action=None), out)
+    assert out == {}        # fade finished: the target is let go, the puppet relaxes by itself
+    assert track.current is None
+
+
+def test_zero_blend_cuts_like_mop():
+    a, b = ramp("x", 0.0, 1.0), ramp("x", 5.0, 6.0)
+    track = Track("p", {"a": (a, (("x", "x"),)), "b": (b, (("x", "x"),))}, {"x": [0.0]},
+                  blend=0.0)
+    out = {}
+    track.update(0.0, FollowState(action="a", progress=1.0), out)
+    track.update(0.04, FollowState(action="b", progress=0.0), out)
+    assert out["x"] == pytest.approx([5.0])
+
+
+class ListSource:
+    """A source that hands out prepared frames, can be unplugged and re-plugged (fault
+    injection for the feed's error handling)."""
+
+    class Frame:
+        def __init__(self, t, values):
+            self.t, self.values = t, np.asarray(values, float)
+
+    def __init__(self, channels):
+        self.channels = tuple(channels)
+        self.queue = []
+        self.unplugged = False
+        self.closed = False
+
+    def read(self, timeout=None):
+        if self.unplugged:
+            raise OSError("device unplugged")
+        return self.queue.pop(0) if self.queue else None
+
+    def close(self):
+        self.closed = True
+
+
+def test_source_feed_newest_frame_silence_failure_and_rejoin():
+    now = [0.0]
+    plugged = {"ok": True}
+    sources = []
+
+    def opener():
+        if not plugged["ok"]:
+            raise OSError("no such device")
+        source = ListSource(("a", "b"))
+        sources.append(source)
+        return source
+
+    feed = SourceFeed(opener, name="p", stale_after=0.5, retry=1.0, clock=lambda: now[0])
+    assert feed.status == SILENT and feed.channels == ("a", "b")
+    sources[0].queue += [ListSource.Frame(0.0, [1, 2]), ListSource.Frame(0.01, [3, 4])]
+    assert feed.poll(0.0) == pytest.approx([3, 4])          # the newest of what arrived
+    assert feed.status == OK and feed.frames == 1
+    now[0] = 0.3
+    assert feed.poll(0.3) == pytest.approx([3, 4])          # held until it is stale
+    now[0] = 0.9
+    assert feed.poll(0.9) is None and feed.status == SILENT
+    sources[0].unplugged = True
+    plugged["ok"] = False
+    now[0] = 1.0
+    assert feed.poll(1.0) is None and feed.status == FAILED
+    assert "unplugged" in feed.message and sources[0].closed
+    now[0] = 1.5                                             # before the retry time: no attempt
+    assert feed.poll(1.5) is None and len(sources) == 1
+    now[0] = 2.1                                             # retry fails: still unplugged
+    assert feed.poll(2.1) is None and feed.status == FAILED and "no such device" in feed.message
+    plugged["ok"] = True
+    now[0] = 3.2
+    assert feed.poll(3.2) is None and feed.status == SILENT and len(sources) == 2
+    sources[1].queue.append(ListSource.Frame(3.2, [7, 8]))
+    assert feed.poll(3.3) == pytest.approx([7, 8]) and feed.status == OK
+
+
+def test_take_feed_interpolates_like_numpy_and_ends(rng):
+    times = np.cumsum(rng.uniform(0.01, 0.05, 60))
+    values = rng.normal(size=(60, 3))
+    feed = TakeFeed(times, values, ("x", "y", "z"))
+    for t in rng.uniform(0, times[-1] - times[0], 50):
+        expected = [np.interp(t, times - times[0], values[:, k]) for k in range(3)]
+        assert feed.poll(t) == pytest.approx(expected)
+    assert feed.poll(feed.duration + 0.01) is None and feed.status == ENDED
+    looping = TakeFeed(times, values, ("x", "y", "z"), loop=True)
+    t = 0.3 * looping.duration
+    assert looping.poll(t + 2 * looping.duration) == pytest.approx(looping.poll(t).copy())
+    with pytest.raises(ValueError, match="increasing"):
+        TakeFeed([0.0, 0.0, 1.0], np.zeros((3, 1)), ("x",))
+
+
+class CountingBank:
+    """Records what a performer's bank is fed (the selection and normalisation under test)."""
+
+    def __init__(self):
+        self.seen, self.resets = [], 0
+
+    def step(self, x):
+        self.seen.append(np.array(x))
+        return FollowState(action="a", progress=0.5)
+
+    def reset(self):
+        self.resets += 1
+
+
+def test_performer_selects_channels_by_name_and_normalises():
+    source = ListSource(("pinky", "thumb", "x", "index"))
+    feed = SourceFeed(lambda: source, name="p", clock=lambda: 0.0)
+    bank = CountingBank()
+    performer = PerformerRuntime("p", feed, bank, channels=("thumb", "index"),
+                                 shift=[1.0, 2.0], scale=[2.0, 4.0])
+    source.queue.append(ListSource.Frame(0, [9.0, 5.0, 0.0, math.nan]))
+    performer.values = feed.poll(0.0)
+    performer.status = feed.status
+    performer.follow()
+    assert bank.seen[0][0] == pytest.approx(2.0) and math.isnan(bank.seen[0][1])
+    performer.values, performer.status = None, SILENT
+    performer.follow()
+    assert bank.resets == 1 and performer.state.action is None
+    source.channels = ("thumb",)
+    feed.channels = ("thumb",)
+    performer.values, performer.status = np.array([1.0]), OK
+    with pytest.raises(ValueError, match="no channel 'index'; it has thumb"):
+        performer.follow()
+
+
+def reference_over(dst, src):
+    """Porter-Duff 'over' with straight alpha, pixel by pixel."""
+    out = np.zeros_like(dst, dtype=float)
+    for index in np.ndindex(dst.shape[:2]):
+        s, d = src[index] / 255.0, dst[index] / 255.0
+        a = s[3] + d[3] * (1 - s[3])
+        rgb = (s[:3] * s[3] + d[:3] * d[3] * (1 - s[3])) / a if a > 0 else np.zeros(3)
+        out[index] = np.concatenate([rgb, [a]]) * 255.0
+    return out
+
+
+def test_blend_over_matches_porter_duff_and_clips(rng):
+    canvas = rng.integers(0, 256, (12, 16, 4), dtype=np.uint8)
+    layer = rng.integers(0, 256, (5, 7, 4), dtype=np.uint8)
+    expected = canvas.astype(float).copy()
+    expected[3:8, -4:] = reference_over(canvas[3:8, -4:], layer[:, :4])
+    blend_over(canvas, layer, 12, 3)            # the right part of the layer is off-canvas
+    assert np.abs(canvas.astype(float) - expected).max() <= 1.0
+    stage = Stage((16, 12), (10, 20, 30))
+    frame = stage.clear()
+    assert (frame[..., :3] == (10, 20, 30)).all() and (frame[..., 3] == 255).all()
+    opaque = np.full((4, 4, 4), 200, np.uint8)
+    opaque[..., 3] = 255
+    stage.place(opaque, (0.5, 0.5))
+    assert (frame[4:8, 6:10, :3] == 200).all() and (frame[3, 6:10, :3] == (10, 20, 30)).all()
+
+
+def test_opaque_fast_path_matches_general_path(rng):
+    canvas = rng.integers(0, 256, (20, 30, 4), dtype=np.uint8)
+    canvas[..., 3] = 255
+    layer = rng.integers(0, 256, (9, 11, 4), dtype=np.uint8)
+    fast, general = canvas.copy(), canvas.copy()
+    blend_over(fast, layer, -3, 14, opaque=True)
+    blend_over(general, layer, -3, 14)
+    assert np.abs(fast.astype(int) - general.astype(int)).max() <= 1
+    assert (fast[..., 3] == 255).all()

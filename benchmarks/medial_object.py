@@ -1,6 +1,7 @@
 """Medial objects: milliseconds per 1/25 s frame by spring count, both constraint methods.
 
     python3 benchmarks/medial_object.py [--frames 100] [--quick]
+    python3 benchmarks/medial_object.py --pictures docs/img     # the README's figures instead
 
 A frame is everything `MedialObject.step(1/25, targets)` does: posing the bones of every joint
 section (several sections move each frame), the Verlet substeps the material's stiffness needs
@@ -67,12 +68,143 @@ def time_frames(step, frames: int) -> np.ndarray:
     return times * 1e3
 
 
+# --- the README's pictures -----------------------------------------------------------------------
+
+SECTION_COLOURS = np.array([[0.6, 0.6, 0.6], [0.95, 0.6, 0.2], [0.3, 0.6, 0.9],
+                            [0.85, 0.35, 0.3], [0.4, 0.75, 0.4], [0.6, 0.45, 0.8],
+                            [0.95, 0.5, 0.7]])
+
+
+def _render(items, *, size, eye, target, bounds):
+    """One offscreen pyrender frame of [(vertices, faces, colours | None, look)], y up."""
+    from mop.render.scene3d import Scene3D, _look_at
+
+    with Scene3D(size=size, camera=_look_at(np.asarray(eye, float), np.asarray(target, float)),
+                 background="white", antialias=True) as scene:
+        for vertices, faces, colours, look in items:
+            scene.add(vertices, faces, colors=colours, look=look)
+        scene.frame(bounds)
+        return scene.render()
+
+
+def _label(image, text):
+    from PIL import Image, ImageDraw
+
+    picture = Image.fromarray(image).convert("RGB")
+    ImageDraw.Draw(picture).text((10, 8), text, fill=(40, 40, 40))
+    return np.asarray(picture)
+
+
+def pictures(folder) -> list:
+    """docs/img/medial_duck_skeleton.png, medial_caterpillar_joints.png, medial_materials.png."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import pybullet_data
+    from PIL import Image
+
+    from characters.medial import MedialObject
+
+    os.makedirs(folder, exist_ok=True)
+    written = []
+
+    # 1. the skeleton inside pybullet's duck (y up): the front half cut away
+    duck = MedialObject.from_mesh(os.path.join(pybullet_data.getDataPath(), "duck.obj"))
+    vertices, faces = duck.rest_vertices, duck.faces
+    bounds = np.stack([vertices.min(0), vertices.max(0)])
+    centre = bounds.mean(0)
+    back = vertices[faces].mean(axis=1)[:, 2] < centre[2] + 0.05
+    red = np.tile([[0.85, 0.15, 0.2]], (len(vertices), 1))
+    panels = []
+    for direction, text in (((0.35, 0.3, 1.0), "skeleton (red) in the duck, front half cut away"),
+                            ((1.0, 0.25, 0.35), "from the side")):
+        eye = centre + 3.6 * np.asarray(direction) / np.linalg.norm(direction)
+        image = _render([(vertices, faces[back], None, "clay"), (duck.skeleton, faces, red, "matte")],
+                        size=(480, 420), eye=eye, target=centre, bounds=bounds)
+        panels.append(_label(image, text))
+    path = os.path.join(folder, "medial_duck_skeleton.png")
+    Image.fromarray(np.concatenate(panels, axis=1)).save(path, optimize=True)
+    written.append(path)
+
+    # 2. the caterpillar (y up): sections at rest, then four joints rotated at once
+    creature = MedialObject.shipped("medial_caterpillar", constraint="spring_reduction")
+
+    colours = SECTION_COLOURS[creature.joints.section_of_vertex % len(SECTION_COLOURS)]
+    rest = creature.surface()
+    pose = {"jaw": 0.55, "head": 0.35, "front": 0.25, "tail": 0.35}
+    for _ in range(60):
+        creature.step(FRAME, pose)
+    posed = creature.surface()
+    bounds = np.stack([rest.min(0), rest.max(0)])
+    centre = bounds.mean(0)
+    panels = []
+    for surface, direction, text in (
+            (rest, (0.0, 0.15, 1.0), "at rest: tail, chest, skull, jaw"),
+            (posed, (0.0, 0.15, 1.0), "jaw 0.55, head 0.35, front 0.25, tail 0.35 rad")):
+        eye = centre + 0.62 * np.asarray(direction) / np.linalg.norm(direction)
+        image = _render([(surface, creature.faces, colours, "matte")], size=(480, 360),
+                        eye=eye, target=centre, bounds=bounds)
+        panels.append(_label(image, text))
+    # close-up of one joint bent hard: the surface folds on the inner side, stretches outside
+    creature.reset()
+    for _ in range(60):
+        creature.step(FRAME, {"front": 0.6})
+    joint = np.array([0.105, 0.07, 0.0])
+    eye = joint + 0.45 * np.array([0.0, 0.2, 1.0]) / np.linalg.norm([0.0, 0.2, 1.0])
+    image = _render([(creature.surface(), creature.faces, colours, "matte")], size=(480, 360),
+                    eye=eye, target=joint, bounds=np.stack([joint - 0.08, joint + 0.08]))
+    panels.append(_label(image, "front 0.6 rad: folded above the joint, stretched below"))
+    path = os.path.join(folder, "medial_caterpillar_joints.png")
+    Image.fromarray(np.concatenate(panels, axis=1)).save(path, optimize=True)
+    written.append(path)
+
+    # 3. the five presets: surface speed after the bunny's top is flung by 0.5 rad and held
+    bunny = os.path.join(pybullet_data.getDataPath(), "bunny.obj")
+    cut = [dict(section="body", names=["bottom", "top"], point=[0.0, 0.0, 0.2],
+                normal=[0.0, 0.0, 1.0], axis=[1.0, 0.0, 0.0])]
+    dt, seconds = 0.02, 8.0
+    figure, axes = plt.subplots(1, 2, figsize=(10, 3.6))
+    for name in ("thick skin", "water", "plastic", "skin", "tight cloth"):
+        obj = MedialObject.from_mesh(bunny, material=name, joints=cut)
+        posed_rest = obj.posed_rest({"top": 0.5})
+        top = obj.joints.vertices_of("top")
+        previous = obj.surface()
+        speed, sway = [], []
+        for _ in range(int(round(seconds / dt))):
+            obj.step(dt, {"top": 0.5})
+            now = obj.surface()
+            speed.append(np.sqrt(np.mean(np.sum((now - previous) ** 2, axis=1))) / dt)
+            sway.append(np.mean(now[top, 1] - posed_rest[top, 1]))
+            previous = now
+        times = dt * np.arange(1, len(speed) + 1)
+        axes[0].semilogy(times[1:], np.maximum(speed[1:], 1e-6), label=name)
+        axes[1].plot(times, 1e3 * np.asarray(sway), label=name)
+    axes[0].set(xlabel="time after the fling [s]", ylabel="RMS surface speed [units/s]",
+                title="wobble: water rings longest, plastic never moves", ylim=(1e-6, 10))
+    axes[1].set(xlabel="time after the fling [s]", ylabel="mean sway of the top [1e-3 units]",
+                title="sway: tight cloth (D 0.2) swings slowest", xlim=(0, 1.5))
+    axes[0].legend(fontsize=8)
+    figure.tight_layout()
+    path = os.path.join(folder, "medial_materials.png")
+    figure.savefig(path, dpi=90)
+    plt.close(figure)
+    written.append(path)
+    return written
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--frames", type=int, default=100, help="frames timed per case")
     parser.add_argument("--quick", action="store_true", help="fewer sizes")
     parser.add_argument("--material", default="skin", help="medial material preset")
+    parser.add_argument("--pictures", metavar="FOLDER", default=None,
+                        help="write the README's pictures to FOLDER instead of timing")
     args = parser.parse_args(argv)
+    if args.pictures:
+        for path in pictures(args.pictures):
+            print(f"wrote {path} ({os.path.getsize(path) // 1024} KB)")
+        return 0
 
     from characters import Verlet
     from characters.medial import MedialObject
@@ -80,7 +212,7 @@ def main(argv=None) -> int:
     print(f"medial objects, material {args.material!r}, {args.frames} frames of 1/25 s per case, "
           f"one core (numba, no threads)")
     header = (f"{'mesh':26s} {'vertices':>8s} {'springs':>8s} {'build s':>7s} {'sub':>3s}  "
-              f"{'constraint':16s} {'median ms':>9s} {'p90 ms':>7s} {'fps':>6s} {'bare ms':>7s} "
+              f"{'constraint':16s} {'median ms':>9s} {'p90 ms':>7s} {'min ms':>6s} {'fps':>6s} {'bare ms':>7s} "
               f"{'ratio':>5s}")
     print(header)
     print("-" * len(header))
@@ -123,7 +255,8 @@ def main(argv=None) -> int:
             ratio = median / float(np.median(reference))
             rows.append((label, obj.vertex_count, obj.model.spring_count, constraint, median))
             print(f"{label:26s} {obj.vertex_count:8d} {obj.model.spring_count:8d} {build:7.2f} "
-                  f"{substeps:3d}  {constraint:16s} {median:9.2f} {p90:7.2f} {1e3 / median:6.0f} "
+                  f"{substeps:3d}  {constraint:16s} {median:9.2f} {p90:7.2f} {medial.min():6.2f} "
+                  f"{1e3 / median:6.0f} "
                   f"{float(np.median(reference)):7.2f} {ratio:5.2f}", flush=True)
     print()
     for constraint in ("circumsphere", "spring_reduction"):
@@ -132,12 +265,14 @@ def main(argv=None) -> int:
             best = max(fast, key=lambda r: r[2])
             print(f"{constraint}: largest object within a 40 ms frame (25 fps): "
                   f"{best[2]:,} springs ({best[0]}, {best[4]:.1f} ms)")
-    at_goal = [r for r in rows if r[2] >= 50_000]
-    if at_goal:
-        worst = max(at_goal, key=lambda r: r[4] / r[2])
-        print(f"goal >= 50,000 springs at 25 fps: slowest case at/above 50k springs is "
-              f"{worst[4]:.1f} ms for {worst[2]:,} springs ({worst[0]}, {worst[3]}) -> "
-              f"{'met' if all(r[4] < 40.0 for r in at_goal) else 'NOT met'}")
+    for constraint in ("circumsphere", "spring_reduction"):
+        at_goal = sorted((r for r in rows if r[3] == constraint and r[2] >= 50_000),
+                         key=lambda r: r[2])
+        if at_goal:
+            first = at_goal[0]
+            print(f"goal >= 50,000 springs at 25 fps ({constraint}): {first[2]:,} springs "
+                  f"({first[0]}) take {first[4]:.1f} ms per frame -> "
+                  f"{'met' if first[4] < 40.0 else 'NOT met'}")
     return 0
 
 

@@ -176,9 +176,9 @@ def main(argv=None) -> int:
         args.long_minutes = min(args.long_minutes, 1.0)
 
     meshes = [
-        ("Table 1 row 2", dict(cells=30, thickness=1.2, springs=6952), 3744),
-        ("Table 1 row 3", dict(cells=36, thickness=1.3, springs=15056), 5664),
-        ("Table 1 row 4", dict(cells=47, thickness=1.3, springs=25892), 9978),
+        ("Table 1 row 2", dict(cells=41, thickness=1.1, springs=6952), 3744),
+        ("Table 1 row 3", dict(cells=35, thickness=1.55, springs=15056), 5664),
+        ("Table 1 row 4", dict(cells=47, thickness=1.5, springs=25892), 9978),
         ("10k / 45k", dict(cells=36, thickness=2.5), None),
     ]
     if not args.quick:

@@ -9,7 +9,8 @@ Packets are parsed with `pythonosc.osc_packet.OscPacket` on our own socket rathe
 python-osc's server, because that server silently drops packets it cannot parse; here garbage,
 wrong argument counts and non-numeric arguments are counted (`stats.malformed`, with the reason in
 `stats.problems`) and skipped. Datagrams the kernel dropped because the receive buffer was full
-are counted too (Linux SO_RXQ_OVFL) in `stats.dropped`. Nothing is ever sent back to the sender.
+are counted too (Linux SO_RXQ_OVFL) in `stats.dropped`; the kernel reports them with the
+next datagram that does arrive. Nothing is ever sent back to the sender.
 To let performers on other machines join, bind host="0.0.0.0" explicitly.
 """
 from __future__ import annotations
@@ -162,6 +163,12 @@ class OscSource(ThreadedSource):
     def _handle(self, data: bytes, sender) -> bool:
         """Apply one datagram to the state; True when some mapped message was applied."""
         parser = self._parser
+        if len(data) % 4:
+            # OSC packets are multiples of 4 bytes; python-osc would read a cut-off last
+            # argument from the bytes that are there
+            self._problem(f"packet from {sender[0]} is {len(data)} bytes, not a multiple of 4 "
+                          f"(cut off?)", malformed=True)
+            return False
         try:
             messages = [timed.message for timed in parser.OscPacket(data).messages]
         except Exception as error:    # ParseError, and whatever else garbage provokes

@@ -319,6 +319,10 @@ class StoreWriter:
                 try:
                     self._db.execute("PRAGMA wal_checkpoint(TRUNCATE)")
                     self._db.execute("PRAGMA journal_mode=DELETE")
+                except sqlite3.OperationalError as error:
+                    # another connection is reading: the file stays in WAL mode, which is
+                    # just as readable; the WAL is folded in when the last reader closes
+                    log.info("take store %s: left in WAL mode (%s)", self.path, error)
                 finally:
                     self._db.close()
         if self._error is not None:

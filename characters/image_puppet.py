@@ -13,9 +13,15 @@ Building (`from_image`): background removal (characters/image/background.py), la
 component, contour, regular grid kept by the even-odd rule plus border cells, two triangles and
 six springs per cell, equal masses (characters/image/mesh.py).
 
+Pins hold a small patch (the vertex and its grid neighbours) rather than one vertex, so a
+pulled pin drags a piece of the picture instead of drawing a spike.
+
 Two ways to move the mesh:
-- mode "springs" (default): the mass-spring network with Verlet integration and velocity damping;
-  the material (liquid, fabric, rubber, rigid) sets stiffness and damping. The picture has
+- mode "springs" (default): the mass-spring network with Verlet integration and damping; the
+  material (liquid, fabric, rubber, rigid: characters/materials.toml) sets stiffness and
+  damping, scaled with the grid so the cell size does not change the look. A no-fold constraint
+  (characters/image/guard.py) keeps triangles from turning inside out when the sheet is
+  pushed together (springs alone have no sense of area). The picture has
   inertia: it lags behind, overshoots and wobbles, and keeps moving after the pins stop. The
   shape depends on the history, so frames must be simulated in order (or baked).
 - mode "arap": as-rigid-as-possible shape manipulation (Igarashi et al. 2005, characters/image/
@@ -41,9 +47,9 @@ import numpy as np
 
 from .control import Control
 from .image.arap import ArapDeformer
-from .image.guard import NoFoldConstraint
-from .image.background import load_image, remove_background
+from .image.background import load_image, remove_background, require_cv2
 from .image.bake import BakedMotion, bake_motion
+from .image.guard import NoFoldConstraint
 from .image.mesh import GridMesh, build_grid_mesh, signed_areas
 from .integrators import Verlet
 from .materials import Material, material_names
@@ -62,17 +68,20 @@ class PuppetMode(str, Enum):
     ARAP = "arap"
 
 
-REFERENCE_CELLS_ACROSS = 24   # the material presets' numbers hold as given for this grid
+REFERENCE_CELLS_ACROSS = DEFAULT_CELLS_ACROSS   # presets hold as given on this grid
 
 
 def image_material(material) -> Material:
     """A preset name (characters/materials.toml) or a `Material` with a per-mass stiffness."""
     if isinstance(material, str):
         key = material.strip().lower()
+        usable = [name for name in material_names()
+                  if lookup_material(name).stiffness is not None]
         if key not in material_names():
+            others = [name for name in usable if name not in material_names("animatron")]
             raise ValueError(f"unknown material {material!r} for an image puppet; choose one of "
-                             f"{material_names('animatron')} (or another preset with a "
-                             f"stiffness: {sorted(set(_spring_materials()) - set(material_names('animatron')))})")
+                             f"{material_names('animatron')} (other presets with a spring "
+                             f"stiffness work too: {others})")
         material = lookup_material(key)
     if not isinstance(material, Material):
         raise TypeError(f"material must be a preset name or a characters.Material, got "
@@ -82,10 +91,6 @@ def image_material(material) -> Material:
                          f"stiffness, so it cannot drive an image puppet; choose one of "
                          f"{material_names('animatron')}")
     return material
-
-
-def _spring_materials() -> list[str]:
-    return [name for name in material_names() if lookup_material(name).stiffness is not None]
 
 
 def spring_parameters(material: Material, cells_across: float) -> tuple[float, float, float]:
@@ -200,15 +205,15 @@ class ImagePuppet:
             meshed on a downscaled copy; the mask and image stay full size and the mesh is
             scaled back, so rendering is at full resolution
         """
-        import cv2
+        cv2 = require_cv2()
         picture = load_image(image)
         height, width = picture.shape[:2]
         if not isinstance(max_mesh_size, (int, np.integer)) or max_mesh_size < 64:
             raise ValueError(f"max_mesh_size must be an int >= 64 [px], got {max_mesh_size!r}")
         scale = min(1.0, max_mesh_size / max(height, width))
         if scale < 1.0:
-            small = cv2.resize(picture, (max(1, round(width * scale)), max(1, round(height * scale))),
-                               interpolation=cv2.INTER_AREA)
+            small_size = (max(1, round(width * scale)), max(1, round(height * scale)))
+            small = cv2.resize(picture, small_size, interpolation=cv2.INTER_AREA)
             scale = small.shape[1] / width
             log.info("picture %dx%d meshed at %dx%d", width, height, small.shape[1],
                      small.shape[0])

@@ -30,10 +30,11 @@ from typing import Mapping
 
 import numpy as np
 
-from .constraints import CircumsphereConstraint, SpringReductionConstraint
+from .constraints import CircumsphereConstraint
 from .control import Control
 from .integrators import Verlet
 from .medial_build import joints as joint_kernels
+from .medial_build.constraints import BoneSpringReduction
 from .medial_build.joints import JointCut, JointSpec, JointTree
 from .medial_build.mesh_input import load_closed_mesh
 from .medial_build.skeleton import Skeleton, skeletonize
@@ -168,7 +169,12 @@ class MedialObject:
     bone_rest_length : (V,) float [mesh units]   L = f_bd x skeleton depth per vertex
     material : MedialMaterial; constraint : ConstraintMethod
     joints : JointTree                 sections (index 0 = the whole object)
-    model : MassSpring; state : SpringState
+    model : MassSpring; state : SpringState   nodes: surface 0..V-1, inner bones V..2V-1,
+                                       outer bones 2V..3V-1
+    dynamic_vertices : (D,) int        surface vertices simulated (bone length > 0)
+    kinematic_vertices : (V - D,) int  surface vertices carried rigidly with their section
+    bone_spring_index : (2D,) int      indices of the bone springs in model.springs
+    max_substep : float [s]            the largest stable Verlet substep
     target_names : tuple[str, ...]     the joint sections `step` accepts angles for
     """
 
@@ -221,10 +227,12 @@ class MedialObject:
                 radius = (material.max_factor - 1.0) * self.bone_rest_length[dyn]
                 constraints.append(CircumsphereConstraint(dyn, radius=radius, name="medial_sphere"))
             else:
-                constraints.append(SpringReductionConstraint(
-                    self.bone_spring_index, min_factor=material.min_factor,
-                    max_factor=material.max_factor, iterations=iterations,
-                    name="medial_spring_reduction"))
+                # the core's SpringReductionConstraint on the bone springs, computed per mass
+                # point with an early stop (same results, tested; see medial_build/constraints)
+                constraints.append(BoneSpringReduction(
+                    dyn, vertex_count + dyn, 2 * vertex_count + dyn, self.bone_rest_length[dyn],
+                    min_factor=material.min_factor, max_factor=material.max_factor,
+                    iterations=iterations))
         self.model = MassSpring(positions, springs, stiffness=stiffness, mass=node_mass,
                                 velocity_damping=material.velocity_damping,
                                 rest_length=rest_length, fixed=fixed, constraints=constraints)
@@ -240,12 +248,10 @@ class MedialObject:
         self.integrator = Verlet(substeps=1, check_energy=False)
 
         # rest arrays the joints transform each step
-        self._section_of_node = np.concatenate(
-            [joints.section_of_vertex] * 3).astype(np.int64)
-        self._rest_nodes = positions.copy()
+        section_of_node = np.concatenate([joints.section_of_vertex] * 3).astype(np.int64)
         self._kinematic_nodes = np.flatnonzero(fixed)
         self._kinematic_rest = np.ascontiguousarray(positions[self._kinematic_nodes])
-        self._kinematic_section = np.ascontiguousarray(self._section_of_node[self._kinematic_nodes])
+        self._kinematic_section = np.ascontiguousarray(section_of_node[self._kinematic_nodes])
         self._dynamic_rest = np.ascontiguousarray(rest[dyn])
         self._dynamic_section = np.ascontiguousarray(joints.section_of_vertex[dyn])
         self._centers = np.empty_like(self._dynamic_rest)

@@ -18,7 +18,8 @@ def bank_decide(frame_loglik, xs, observed, n_obs, background_mean, background_w
                 moments, main, lengths, progress, variance):
     """Update the bank's decision after one frame.
 
-    frame_loglik (K,) float: each follower's log-likelihood of this frame
+    frame_loglik (2, K) float: each follower's log-likelihood of this frame under its own
+        emission model (row 0) and its recognition model (row 1, what the bank uses)
     xs (D,) float: the cleaned frame; observed (D,) float: 1 or 0 (see ``_kernels.prepare_frame``)
     n_obs : int: observed channels this frame (0: the frame says nothing, nothing changes)
     background_mean, background_weight, background_log_norm (D,) float: the background model, one
@@ -46,7 +47,7 @@ def bank_decide(frame_loglik, xs, observed, n_obs, background_mean, background_w
     moments (K, 2, 3), main (K,), lengths (K,): the engine's tracks (see ``_kernels``)
     progress, variance (K,) float out: each follower's main-track progress [0, 1] and variance
     """
-    K = frame_loglik.shape[0]
+    K = frame_loglik.shape[1]
     for k in range(K):
         scale = 1.0 / (lengths[k] - 1)
         t = main[k]
@@ -62,13 +63,13 @@ def bank_decide(frame_loglik, xs, observed, n_obs, background_mean, background_w
                 background += background_log_norm[d] - 0.5 * (v if v < cap else cap)
         fit_weight[0] = decay * fit_weight[0] + 1.0
         inv_w = 1.0 / fit_weight[0]
-        frame_best = frame_loglik[0]
+        frame_best = frame_loglik[1, 0]
         for k in range(1, K):
-            if frame_loglik[k] > frame_best:
-                frame_best = frame_loglik[k]
+            if frame_loglik[1, k] > frame_best:
+                frame_best = frame_loglik[1, k]
         leader = -np.inf
         for k in range(K):
-            value = frame_loglik[k]
+            value = frame_loglik[1, k]
             evidence = value - frame_best
             if evidence < -evidence_cap:
                 evidence = -evidence_cap

@@ -17,11 +17,13 @@ _CLAMP_SPAN = 1e3
 
 def _upsample(values: np.ndarray, factor: int) -> np.ndarray:
     """(T, D) -> (factor * (T - 1) + 1, D): linear interpolation, original frames kept."""
-    T = values.shape[0]
-    grid = np.arange(factor * (T - 1) + 1) / factor
-    base = np.arange(T, dtype=np.float64)
-    return np.stack([np.interp(grid, base, values[:, d]) for d in range(values.shape[1])],
-                    axis=1)
+    T, D = values.shape
+    out = np.empty((factor * (T - 1) + 1, D))
+    out[::factor] = values
+    for r in range(1, factor):
+        w = r / factor
+        out[r::factor] = (1.0 - w) * values[:-1] + w * values[1:]
+    return out
 
 
 class ForwardEngine:
@@ -32,16 +34,22 @@ class ForwardEngine:
     windows : (K,) int [template frames]
     (with ``transitions.resolution = R > 1`` the engine holds R (T_k - 1) + 1 states per template)
     transitions : TransitionModel; cap : float (inf = plain Gaussian) [squared sigmas]
+    recognition_sigmas : list of K (T_k, D) float, optional: a second emission model that only
+        scores each frame (``frame_loglik[1]``) from the same predicted state distribution;
+        None scores with the follower's own model
     prune : float: edge states of a track's support below this mass are dropped (0 = never)
     """
 
     def __init__(self, templates: list[np.ndarray], sigmas: list[np.ndarray], windows: np.ndarray,
-                 transitions: TransitionModel, *, cap: float, prune: float):
+                 transitions: TransitionModel, *, cap: float, prune: float,
+                 recognition_sigmas: list[np.ndarray] | None = None):
         R = transitions.resolution
         if R > 1:
             # R states per template frame: the template and its sigma, linearly interpolated
             templates = [_upsample(t, R) for t in templates]
             sigmas = [_upsample(s, R) for s in sigmas]
+            if recognition_sigmas is not None:
+                recognition_sigmas = [_upsample(s, R) for s in recognition_sigmas]
             windows = np.asarray(windows) * R
         self.resolution = R
         self.channels = int(templates[0].shape[1])
@@ -50,12 +58,13 @@ class ForwardEngine:
         self.offsets[1:] = np.cumsum(self.lengths)[:-1]
         self.templates = np.ascontiguousarray(np.concatenate(templates, axis=0))
         self.sigmas = np.ascontiguousarray(np.concatenate(sigmas, axis=0), dtype=np.float64)
-        self.weights = 1.0 / self.sigmas ** 2
-        self.state_log_norm = -0.5 * np.log(2.0 * np.pi * self.sigmas ** 2)
-        self.state_log_norm_sum = self.state_log_norm.sum(axis=1)
-        # per template and channel: the mean normaliser, what the bank's fit subtracts
-        self.log_norm = np.stack([self.state_log_norm[o:o + n].mean(axis=0)
-                                  for o, n in zip(self.offsets, self.lengths)])
+        # emission models: 0 drives the forward recursion, 1 only scores frames for recognition
+        self.dual = recognition_sigmas is not None
+        rec = (np.concatenate(recognition_sigmas, axis=0) if self.dual else self.sigmas)
+        both = np.stack([self.sigmas, np.asarray(rec, dtype=np.float64)])
+        self.weights = np.ascontiguousarray(1.0 / both ** 2)
+        self.state_log_norm = np.ascontiguousarray(-0.5 * np.log(2.0 * np.pi * both ** 2))
+        self.state_log_norm_sum = np.ascontiguousarray(self.state_log_norm.sum(axis=2))
         self.half_windows = np.ascontiguousarray(windows, dtype=np.int64)
         self.transitions = transitions
         self.cap = float(cap)
@@ -78,13 +87,13 @@ class ForwardEngine:
         M = transitions.levels
         self.alpha = np.zeros((2, S, M))
         self.rowsum = np.zeros((2, S))
-        self.logb = np.zeros(S)
+        self.logb = np.zeros((2, S))
         self.support = np.zeros((K, 2, 2), dtype=np.int64)
         self.moments = np.zeros((K, 2, 3))
         self.main = np.zeros(K, dtype=np.int64)
         self.fresh = np.ones(K, dtype=np.bool_)
         self.loglik = np.zeros(K)
-        self.frame_loglik = np.zeros(K)
+        self.frame_loglik = np.zeros((2, K))
         self._xs = np.zeros(self.channels)
         self._observed = np.zeros(self.channels)
         self._mix = np.zeros(M)
@@ -117,7 +126,7 @@ class ForwardEngine:
         return _kernels.bank_step(
             x, self.lower, self.upper, self.templates, self.offsets, self.lengths,
             self.half_windows, self.weights, self.state_log_norm, self.state_log_norm_sum,
-            self.cap, self.prune,
+            self.cap, self.dual, self.prune,
             self.advance, self.advance_tail, self.speed_change, self.initial_speed, self.restart,
             self.alpha, self.rowsum, self.logb, self.support, self.moments, self.main, self.fresh,
             self.loglik, self.frame_loglik, self._xs, self._observed, self._mix)
@@ -133,7 +142,7 @@ class ForwardEngine:
         _kernels.follow_sequence(
             X, self.lower, self.upper, self.templates, self.offsets, self.lengths,
             self.half_windows, self.weights, self.state_log_norm, self.state_log_norm_sum,
-            self.cap, self.prune,
+            self.cap, self.dual, self.prune,
             self.advance, self.advance_tail, self.speed_change, self.initial_speed, self.restart,
             self.alpha, self.rowsum, self.logb, self.support, self.moments, self.main, self.fresh,
             self.loglik, self.frame_loglik, self._xs, self._observed, self._mix,

@@ -57,23 +57,38 @@ def prepare_frame(x, lower, upper, xs, observed):
 
 @nb.njit(cache=True, fastmath={"reassoc", "contract"})
 def _emission_rows(templates, weights, log_norm, log_norm_sum, first, last, xs, observed,
-                   all_observed, cap, out):
-    # out[j] = sum over observed d of -0.5 * min(w[j, d] * (x[d] - template[j, d])**2, cap)
-    #          + log_norm[j, d], for rows first..last
+                   all_observed, cap, dual, out):
+    # out[e, j] = sum over observed d of -0.5 * min(w[e, j, d] * (x[d] - template[j, d])**2, cap)
+    #             + log_norm[e, j, d], for rows first..last; e = 0 the follower's model,
+    #             e = 1 the recognition model (only when dual, else a copy of e = 0)
     D = xs.shape[0]
     for j in range(first, last + 1):
         acc = 0.0
-        for d in range(D):
-            diff = xs[d] - templates[j, d]
-            v = weights[j, d] * observed[d] * diff * diff
-            acc += v if v < cap else cap
+        acc_rec = 0.0
+        if dual:
+            for d in range(D):
+                diff = xs[d] - templates[j, d]
+                sq = observed[d] * diff * diff
+                v = weights[0, j, d] * sq
+                acc += v if v < cap else cap
+                v = weights[1, j, d] * sq
+                acc_rec += v if v < cap else cap
+        else:
+            for d in range(D):
+                diff = xs[d] - templates[j, d]
+                v = weights[0, j, d] * observed[d] * diff * diff
+                acc += v if v < cap else cap
         if all_observed:
-            norm = log_norm_sum[j]
+            norm = log_norm_sum[0, j]
+            norm_rec = log_norm_sum[1, j]
         else:
             norm = 0.0
+            norm_rec = 0.0
             for d in range(D):
-                norm += log_norm[j, d] * observed[d]
-        out[j] = norm - 0.5 * acc
+                norm += log_norm[0, j, d] * observed[d]
+                norm_rec += log_norm[1, j, d] * observed[d]
+        out[0, j] = norm - 0.5 * acc
+        out[1, j] = (norm_rec - 0.5 * acc_rec) if dual else out[0, j]
 
 
 @nb.njit(cache=True)
@@ -177,8 +192,40 @@ def _argmax_row(rowsum, track, off, first, last):
 
 
 @nb.njit(cache=True)
+def _predictive_loglik(rowsum, logb, model, support, k, off):
+    """log sum_j predicted_j * b_j(x) over both tracks, for emission model ``model``, scaled so
+    that it neither under- nor overflows."""
+    shift = -np.inf
+    for t in range(2):
+        for j in range(support[k, t, 0], support[k, t, 1] + 1):
+            if rowsum[t, off + j] > 0.0 and logb[model, off + j] > shift:
+                shift = logb[model, off + j]
+    if shift == -np.inf:
+        return -1e300
+    c = 0.0
+    for t in range(2):
+        for j in range(support[k, t, 0], support[k, t, 1] + 1):
+            c += rowsum[t, off + j] * math.exp(logb[model, off + j] - shift)
+    if c > 1e-280:
+        return math.log(c) + shift
+    best = -np.inf
+    for t in range(2):
+        for j in range(support[k, t, 0], support[k, t, 1] + 1):
+            v = rowsum[t, off + j]
+            if v > 0.0:
+                lv = math.log(v) + logb[model, off + j]
+                if lv > best:
+                    best = lv
+    c = 0.0
+    for t in range(2):
+        for j in range(support[k, t, 0], support[k, t, 1] + 1):
+            c += rowsum[t, off + j] * math.exp(logb[model, off + j] - best)
+    return math.log(c) + best if c > 0.0 else -1e300
+
+
+@nb.njit(cache=True)
 def template_step(k, templates, offsets, lengths, half_windows, weights, log_norm, log_norm_sum,
-                  xs, observed, n_obs, cap, prune, advance, advance_tail, speed_change,
+                  xs, observed, n_obs, cap, dual, prune, advance, advance_tail, speed_change,
                   initial_speed, restart, alpha, rowsum, logb, support, moments, main, fresh,
                   loglik, frame_loglik, mix):
     """One frame of the windowed forward algorithm for template ``k`` (see the module docstring
@@ -278,32 +325,35 @@ def template_step(k, templates, offsets, lengths, half_windows, weights, log_nor
         all_observed = n_obs == xs.shape[0]
         if has_main:
             _emission_rows(templates, weights, log_norm, log_norm_sum, off + m_first,
-                           off + m_last, xs, observed, all_observed, cap, logb)
+                           off + m_last, xs, observed, all_observed, cap, dual, logb)
         if has_entry:
             # only the rows the main track did not already cover
             if not has_main or e_last < m_first or e_first > m_last:
                 _emission_rows(templates, weights, log_norm, log_norm_sum, off + e_first,
-                               off + e_last, xs, observed, all_observed, cap, logb)
+                               off + e_last, xs, observed, all_observed, cap, dual, logb)
             else:
                 if e_first < m_first:
                     _emission_rows(templates, weights, log_norm, log_norm_sum, off + e_first,
-                                   off + m_first - 1, xs, observed, all_observed, cap, logb)
+                                   off + m_first - 1, xs, observed, all_observed, cap, dual,
+                                   logb)
                 if e_last > m_last:
                     _emission_rows(templates, weights, log_norm, log_norm_sum, off + m_last + 1,
-                                   off + e_last, xs, observed, all_observed, cap, logb)
+                                   off + e_last, xs, observed, all_observed, cap, dual, logb)
+        if dual:
+            frame_loglik[1, k] = _predictive_loglik(rowsum, logb, 1, support, k, off)
         shift = -np.inf
         for t in range(2):
             first = support[k, t, 0]
             last = support[k, t, 1]
             for j in range(first, last + 1):
-                if rowsum[t, off + j] > 0.0 and logb[off + j] > shift:
-                    shift = logb[off + j]
+                if rowsum[t, off + j] > 0.0 and logb[0, off + j] > shift:
+                    shift = logb[0, off + j]
         if shift == -np.inf:
             shift = 0.0
         c = 0.0
         for t in range(2):
             for j in range(support[k, t, 0], support[k, t, 1] + 1):
-                c += rowsum[t, off + j] * math.exp(logb[off + j] - shift)
+                c += rowsum[t, off + j] * math.exp(logb[0, off + j] - shift)
         if not c > 1e-280:
             # the rows with mass all sit far below the best row: rescale by the best product
             best = -np.inf
@@ -311,14 +361,14 @@ def template_step(k, templates, offsets, lengths, half_windows, weights, log_nor
                 for j in range(support[k, t, 0], support[k, t, 1] + 1):
                     v = rowsum[t, off + j]
                     if v > 0.0:
-                        lv = math.log(v) + logb[off + j]
+                        lv = math.log(v) + logb[0, off + j]
                         if lv > best:
                             best = lv
             shift = best
         for t in range(2):
             for j in range(support[k, t, 0], support[k, t, 1] + 1):
                 r = off + j
-                e = math.exp(logb[r] - shift)
+                e = math.exp(logb[0, r] - shift)
                 rowsum[t, r] *= e
                 for m in range(M):
                     alpha[t, r, m] *= e
@@ -326,9 +376,12 @@ def template_step(k, templates, offsets, lengths, half_windows, weights, log_nor
     for t in range(2):
         for j in range(support[k, t, 0], support[k, t, 1] + 1):
             c += rowsum[t, off + j]
+    if n_obs == 0 and c > 0.0:
+        frame_loglik[1, k] = math.log(c)
     if not (c > 0.0 and c < np.inf):
         # unreachable with clamped input; keep the output finite and start over next frame
-        frame_loglik[k] = -1e300
+        frame_loglik[0, k] = -1e300
+        frame_loglik[1, k] = -1e300
         loglik[k] = max(loglik[k] - 1e300, -1e308)
         fresh[k] = True
         moments[k, 0, 0] = 0.0
@@ -342,7 +395,9 @@ def template_step(k, templates, offsets, lengths, half_windows, weights, log_nor
             for m in range(M):
                 alpha[t, r, m] *= inv
     step_ll = math.log(c) + shift
-    frame_loglik[k] = step_ll
+    frame_loglik[0, k] = step_ll
+    if not dual:
+        frame_loglik[1, k] = step_ll
     total_ll = loglik[k] + step_ll
     loglik[k] = total_ll if total_ll > -1e308 else -1e308
     if prune > 0.0:
@@ -392,7 +447,7 @@ def template_step(k, templates, offsets, lengths, half_windows, weights, log_nor
 
 @nb.njit(cache=True)
 def bank_step(x, lower, upper, templates, offsets, lengths, half_windows, weights, log_norm,
-              log_norm_sum, cap, prune, advance, advance_tail, speed_change, initial_speed,
+              log_norm_sum, cap, dual, prune, advance, advance_tail, speed_change, initial_speed,
               restart, alpha, rowsum, logb, support, moments, main, fresh, loglik, frame_loglik,
               xs, observed, mix):
     """One frame for all K templates. ``x (D,)`` is the raw input frame. Returns the number of
@@ -400,7 +455,7 @@ def bank_step(x, lower, upper, templates, offsets, lengths, half_windows, weight
     n_obs = prepare_frame(x, lower, upper, xs, observed)
     for k in range(offsets.shape[0]):
         template_step(k, templates, offsets, lengths, half_windows, weights, log_norm,
-                      log_norm_sum, xs, observed, n_obs, cap, prune, advance, advance_tail,
+                      log_norm_sum, xs, observed, n_obs, cap, dual, prune, advance, advance_tail,
                       speed_change, initial_speed, restart, alpha, rowsum, logb, support, moments,
                       main, fresh, loglik, frame_loglik, mix)
     return n_obs
@@ -408,7 +463,7 @@ def bank_step(x, lower, upper, templates, offsets, lengths, half_windows, weight
 
 @nb.njit(cache=True)
 def follow_sequence(X, lower, upper, templates, offsets, lengths, half_windows, weights, log_norm,
-                    log_norm_sum, cap, prune, advance, advance_tail, speed_change, initial_speed,
+                    log_norm_sum, cap, dual, prune, advance, advance_tail, speed_change, initial_speed,
                     restart, alpha, rowsum, logb, support, moments, main, fresh, loglik,
                     frame_loglik, xs, observed, mix, out_progress, out_variance, out_loglik):
     """Run ``bank_step`` over the rows of ``X (N, D)``; write each template's main-track
@@ -417,7 +472,7 @@ def follow_sequence(X, lower, upper, templates, offsets, lengths, half_windows, 
     K = offsets.shape[0]
     for n in range(X.shape[0]):
         bank_step(X[n], lower, upper, templates, offsets, lengths, half_windows, weights,
-                  log_norm, log_norm_sum, cap, prune, advance, advance_tail, speed_change,
+                  log_norm, log_norm_sum, cap, dual, prune, advance, advance_tail, speed_change,
                   initial_speed, restart, alpha, rowsum, logb, support, moments, main, fresh,
                   loglik, frame_loglik, xs, observed, mix)
         for k in range(K):

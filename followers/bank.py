@@ -8,7 +8,8 @@ import numpy as np
 
 from followers import _bank_kernels
 from followers._engine import ForwardEngine
-from followers.defaults import as_sigma, as_template, as_window, default_sigma, default_window
+from followers.defaults import (as_sigma, as_template, as_window, default_sigma, default_window,
+                                recognition_sigma)
 from followers.follower import PRUNE_MASS, resolve_cap, resolve_transitions
 
 # rejection: a follower accepts the input while it explains the recent frames better than the
@@ -165,9 +166,12 @@ class FollowerBank:
         self._index = {n: i for i, n in enumerate(names)}
         self._templates = arrays
         self._transitions = model
+        recognition = None if model.kind == "mop" else [
+            recognition_sigma(a, s) for a, s in zip(arrays, sigmas)]
         self._engine = ForwardEngine(arrays, sigmas, windows, model,
                                      cap=resolve_cap(outlier_sigmas, model.kind),
-                                     prune=0.0 if model.kind == "mop" else PRUNE_MASS)
+                                     prune=0.0 if model.kind == "mop" else PRUNE_MASS,
+                                     recognition_sigmas=recognition)
         self.memory = memory
         self.reject_margin = reject_margin
         self.switch_posterior = float(switch_posterior)

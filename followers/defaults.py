@@ -23,6 +23,8 @@ SIGMA_FRACTION = 0.25
 SIGMA_FLOOR = 0.05
 LOCAL_FRACTION = 0.05
 LOCAL_WEIGHT = 0.0
+RECOGNITION_FRACTION = 0.5
+RECOGNITION_LOCAL = 0.0
 WINDOW_FRACTION = 0.2
 WINDOW_MIN = 8
 
@@ -64,14 +66,23 @@ def local_variance(template: np.ndarray, half: int) -> np.ndarray:
     return np.maximum((c2[hi] - c2[lo]) / n - mean ** 2, 0.0)
 
 
+def channel_spread(templates: list[np.ndarray]) -> np.ndarray:
+    """(D,) float: standard deviation of each channel over every frame of the templates
+    (computed from per-template sums, without stacking them)."""
+    count = sum(t.shape[0] for t in templates)
+    total = sum(t.sum(axis=0) for t in templates)
+    mean = total / count
+    square = sum(((t - mean) ** 2).sum(axis=0) for t in templates)
+    return np.sqrt(square / count)
+
+
 def default_sigma(template: np.ndarray, *, pooled: list[np.ndarray] | None = None) -> np.ndarray:
     """Per-state, per-channel sigma estimated from a template.
 
     template : (T, D) float (validated); pooled : optional list of (T_k, D) templates whose
     channel spreads set the base level (a bank passes all its templates, so every follower
     measures distance the same way). Returns (T, D) float [input units]."""
-    stacked = np.concatenate(pooled if pooled else [template], axis=0)
-    spread = stacked.std(axis=0)
+    spread = channel_spread(pooled if pooled else [template])
     rms = float(np.sqrt(np.mean(spread ** 2)))
     if rms <= 0.0:
         return np.ones_like(template)
@@ -81,6 +92,24 @@ def default_sigma(template: np.ndarray, *, pooled: list[np.ndarray] | None = Non
         half = max(1, int(round(LOCAL_FRACTION * template.shape[0])))
         var += LOCAL_WEIGHT * local_variance(template, half)
     return np.sqrt(var)
+
+
+def recognition_sigma(template: np.ndarray, sigma: np.ndarray) -> np.ndarray:
+    """Sigma of the bank's recognition model for one template (see ``FollowerBank``).
+
+    Recognising *which* action is performed must tolerate what following does not: another
+    performance of an action differs from the demonstration in timing detail and intensity.
+    Per state: the follower's sigma, at least ``RECOGNITION_FRACTION`` of the template's own
+    channel spread, plus the template's local variance over +-``LOCAL_FRACTION`` of its length
+    (a state may be met a little earlier or later than demonstrated).
+
+    template : (T, D) float; sigma : (T, D) float. Returns (T, D) float [input units]."""
+    spread = template.std(axis=0)
+    rms = float(np.sqrt(np.mean(spread ** 2)))
+    own = RECOGNITION_FRACTION * np.maximum(spread, SIGMA_FLOOR * rms) if rms > 0 else spread
+    base = np.maximum(sigma, own[None, :])
+    half = max(1, int(round(LOCAL_FRACTION * template.shape[0])))
+    return np.sqrt(base ** 2 + RECOGNITION_LOCAL * local_variance(template, half))
 
 
 def default_window(length: int) -> int:

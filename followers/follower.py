@@ -140,7 +140,7 @@ class Follower:
         engine.step(engine.check_frame(x))
         progress, variance = engine.progress_of(0)
         return FollowerOutput(progress, variance, float(engine.loglik[0]),
-                              float(engine.frame_loglik[0]))
+                              float(engine.frame_loglik[0, 0]))
 
     def follow(self, X, *, reset: bool = True) -> FollowerTrace:
         """Follow a whole sequence ``X (N, D) float`` (from a fresh start unless ``reset=False``).

@@ -15,7 +15,10 @@ per frame, a new repetition begins at the first state with the initial speed dis
   ``floor(s)`` or ``floor(s) + 1`` states with probabilities that make the mean advance ``s``.
   The speed level changes to a neighbour with probability ``speed_jitter`` per frame, so the
   follower keeps the performer's tempo through stretches where the input says nothing
-  (a held pose) yet adapts when the performer accelerates.
+  (a held pose) yet adapts when the performer accelerates. A restart probability of 1e-3 per
+  frame lets a new repetition (or a performer who starts late) be picked up at any time.
+  ``resolution=R`` optionally upsamples the template to R states per frame (finer positions
+  for slow performers, R times the work; measured no better on GunPoint, so off by default).
 - ``"skip"`` — one speed level with skip transitions of 0–3 states (a memoryless
   alternative, kept for comparison in the benchmark).
 """
@@ -43,7 +46,7 @@ class TransitionModel:
     restart : float in [0, 1): per-frame probability that a new repetition begins
     resolution : int >= 1: HMM states per template frame. With 2, the template is linearly
         upsampled and a performer at 0.5x advances exactly one state per frame instead of
-        0 or 1 at random, which keeps the progress variance honest at slow speeds.
+        0 or 1 at random.
     """
 
     kind: str
@@ -85,7 +88,7 @@ def transition_model(kind: str = "speed", *, min_speed: float = 0.4, max_speed: 
     min_speed, max_speed : float > 0 [x template speed]: range of the speed levels ("speed").
     levels : int >= 1: number of log-spaced speed levels ("speed").
     speed_jitter : float in [0, 0.5]: per-frame probability of moving to each neighbouring level.
-    resolution : int >= 1 or None: states per template frame ("speed"; default 2). "mop" and
+    resolution : int >= 1 or None: states per template frame ("speed"; default 1). "mop" and
         "skip" always use 1 (one state per frame, as in the paper).
     restart : float in [0, 1) or None: per-frame probability of a new repetition starting at the
         first state. None means 1e-3 for "speed" and "skip", 0 for "mop" (the paper has none).
@@ -101,7 +104,7 @@ def transition_model(kind: str = "speed", *, min_speed: float = 0.4, max_speed: 
         raise ValueError(f"resolution applies to 'speed' transitions only, got {resolution} "
                          f"with {kind!r}")
     if resolution is None:
-        resolution = 2 if kind == "speed" else 1
+        resolution = 1
     if isinstance(resolution, bool) or not isinstance(resolution, (int, np.integer)) \
             or resolution < 1:
         raise ValueError(f"resolution must be an int >= 1, got {resolution!r}")

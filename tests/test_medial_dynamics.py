@@ -191,7 +191,7 @@ def test_fold_on_the_inner_side_of_the_joint(angle, inner, creature_mesh):
     rest_n, now_n = normals(obj.rest_vertices), normals(obj.surface())
     # signed area ratio against the rest orientation: < 0 where the surface has folded over
     signed = np.einsum("ij,ij->i", now_n, rest_n) / np.einsum("ij,ij->i", rest_n, rest_n)
-    upper = obj.rest_vertices[faces].mean(axis=1)[:, 2] > 0.05
+    upper = obj.rest_vertices[faces].mean(axis=1)[:, 1] > 0.05   # y is up
     side = {"top": spanning & upper, "bottom": spanning & ~upper}
     outer = "bottom" if inner == "top" else "top"
     assert side[inner].sum() > 10 and side[outer].sum() > 10
@@ -233,7 +233,7 @@ def test_shipped_motion_drives_the_creature():
     for frame in range(int(motion.duration * fps)):
         targets = motion.sample(frame / fps)
         obj.step(1.0 / fps, targets)
-        openings.append(np.mean(obj.surface()[jaw, 2]))
+        openings.append(np.mean(obj.surface()[jaw, 1]))
     assert np.all(np.isfinite(obj.state.x))
     assert np.ptp(openings) > 0.01     # the jaw chattered [m]
 
@@ -271,3 +271,28 @@ def test_substeps_keep_verlet_below_its_stability_limit(bunny_mesh):
     # a 1/25 s frame in one explicit step would blow up without constraints: the limit is real
     k_over_m = obj.material.stiffness
     assert obj.max_substep < 2.0 / np.sqrt(k_over_m)
+
+
+def test_bone_spring_reduction_matches_the_core_constraint(bunny_mesh, rng):
+    """The medial kernel (per point, early stop) against the core's SpringReductionConstraint
+    (every pass over every spring) on the same violent positions: the same result."""
+    from characters import SpringReductionConstraint
+
+    obj = MedialObject.from_mesh(bunny_mesh, material="water", constraint="spring_reduction",
+                                 joints=[BUNNY_CUT], check_self_intersections=False)
+    ours = obj.model.constraints[0]
+    core = SpringReductionConstraint(obj.bone_spring_index, min_factor=ours.min_factor,
+                                     max_factor=ours.max_factor, iterations=ours.iterations)
+    core.check(obj.model)
+    dyn = obj.dynamic_vertices
+    for scale in (0.01, 0.1, 1.0):
+        x = obj.model.rest_positions.copy()
+        x[dyn] += rng.normal(scale=scale, size=(len(dyn), 3))
+        v = rng.normal(size=x.shape)
+        x_core, v_core = x.copy(), v.copy()
+        left_ours = ours.apply(x, v, 0.01, obj.model.inverse_mass)
+        left_core = core.apply(x_core, v_core, 0.01, obj.model.inverse_mass)
+        np.testing.assert_allclose(x, x_core, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(v, v_core, rtol=0, atol=1e-9)
+        assert left_ours == pytest.approx(left_core, abs=1e-12)
+        assert core.violation(x) < 1e-6

@@ -41,12 +41,12 @@ def replay(path, *, duration):
 
 def test_two_performers_three_characters_replayed_twice_give_identical_frames(tmp_path):
     path = write_session(tmp_path)
-    first, report, log_a = replay(path, duration=6.0)
-    second, _, log_b = replay(path, duration=6.0)
-    assert report.frames == 150 and len(log_a.digests) == 150
+    first, report, log_a = replay(path, duration=4.4)
+    second, _, log_b = replay(path, duration=4.4)
+    assert report.frames == 110 and len(log_a.digests) == 110
     assert log_a.digests == log_b.digests
     # ... and the frames are not trivially equal: the characters moved
-    assert len(set(log_a.digests)) > 100
+    assert len(set(log_a.digests)) > 90
     # the followers recognised what was performed, and momo listened to both performers
     assert {"glove_ripple", "glove_chomp"} <= first.performers[0].seen
     assert {"hand_circle", "hand_lift"} <= first.performers[1].seen
@@ -57,7 +57,7 @@ def test_two_performers_three_characters_replayed_twice_give_identical_frames(tm
                for track in character["tracks"]}
     assert {("momo", "glove_ripple"), ("momo", "hand_lift"), ("creature", "hand_circle"),
             ("worm", "glove_chomp")} <= actions
-    assert report.stages["simulate"]["count"] == 150
+    assert report.stages["simulate"]["count"] == 110
 
 
 def test_replay_runs_until_the_takes_end_and_reports_timing(tmp_path):
@@ -225,17 +225,18 @@ def test_a_performer_on_another_process_joins_over_osc(tmp_path):
     listener.bind(("127.0.0.1", out_port))
     listener.settimeout(0.5)
     path = write_session(tmp_path, hand_source=f"osc:127.0.0.1:{hand_port}/hand?channels=x,y,z")
-    performer = mop_process("perform", path, "--realtime", "--duration", "7", "--no-render",
+    performer = mop_process("perform", path, "--realtime", "--duration", "20", "--no-render",
                             "--osc-out", f"127.0.0.1:{out_port}")
     sender = None
     try:
         wait_for_line(performer.stderr, r"^performing", timeout=60)
-        sender = mop_process("send", f"replay:{TAKES / 'hand_show'}", "--to",
+        sender = mop_process("send", f"replay:{TAKES / 'hand_show'}?loop=true", "--to",
                              f"127.0.0.1:{hand_port}", "--address", "/hand")
         from pythonosc.osc_bundle import OscBundle
         creature_actions, hand_status = set(), set()
         deadline = time.monotonic() + 30
-        while time.monotonic() < deadline and performer.poll() is None:
+        while (time.monotonic() < deadline and performer.poll() is None
+               and not ("ok" in hand_status and "hand_circle" in creature_actions)):
             try:
                 data = listener.recv(65536)
             except socket.timeout:
@@ -245,12 +246,13 @@ def test_a_performer_on_another_process_joins_over_osc(tmp_path):
                     creature_actions.add(message.params[0])
                 elif message.address == "/mop/performer/hand":
                     hand_status.add(message.params[0])
+        performer.send_signal(signal.SIGINT)
         out, err = performer.communicate(timeout=30)
     finally:
         performer.kill()
         if sender is not None:
             sender.kill()
         listener.close()
-    assert performer.returncode == 0, err
+    assert performer.returncode in (0, 130), err
     assert "ok" in hand_status
     assert "hand_circle" in creature_actions

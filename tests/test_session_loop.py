@@ -27,16 +27,16 @@ def test_track_cross_fades_between_actions_then_plays_the_new_one():
     out = {}
     track.update(0.0, FollowState(action="a", progress=0.5), out)
     # from nothing to "a": no previous targets, so the new motion plays at once
-    assert out["finger"] == pytest.approx([0.5])
+    assert out["finger"] == pytest.approx(0.5) and isinstance(out["finger"], float)
     track.update(1.0, FollowState(action="a", progress=0.75), out)
-    assert out["finger"] == pytest.approx([0.75])
+    assert out["finger"] == pytest.approx(0.75)
     # switch to "b" at t = 1.0: the fade starts from what "a" last gave (0.75)
     for t, progress in [(1.0, 0.0), (1.1, 0.1), (1.2, 0.2), (1.3, 0.3), (1.4, 0.4), (1.8, 0.5)]:
         out.clear()
         track.update(t, FollowState(action="b", progress=progress), out)
         goal = 10.0 + 10.0 * progress
         w = smoothstep((t - 1.0) / 0.4)
-        assert out["finger"] == pytest.approx([(1 - w) * 0.75 + w * goal]), t
+        assert out["finger"] == pytest.approx((1 - w) * 0.75 + w * goal), t
     assert track.current == "b" and track.weight == 1.0
 
 
@@ -67,7 +67,7 @@ def test_zero_blend_cuts_like_mop():
     out = {}
     track.update(0.0, FollowState(action="a", progress=1.0), out)
     track.update(0.04, FollowState(action="b", progress=0.0), out)
-    assert out["x"] == pytest.approx([5.0])
+    assert out["x"] == pytest.approx(5.0)
 
 
 class ListSource:

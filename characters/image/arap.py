@@ -90,10 +90,11 @@ def edge_incidence(triangles: np.ndarray, node_count: int) -> tuple[np.ndarray, 
     return edges, sp.csr_matrix((vals, (rows, cols)), shape=(count, node_count))
 
 
-def fit_matrices(rest: np.ndarray, triangles: np.ndarray) -> np.ndarray:
-    """(F, 4, 6) float: per triangle, the least-squares map from its three step-1 vertices
-    (a, b, c) (6,) to the fitted v0, v1 (4,) of a similar copy of the rest triangle,
-    v2 = M0 v0 + M1 v1 (M0 = (1 - x) I - y R90, M1 = x I + y R90, (x, y) of v2 on edge 0-1)."""
+def fit_matrices(rest: np.ndarray, triangles: np.ndarray):
+    """Per triangle, the least-squares map fit (F, 4, 6) from its three step-1 vertices
+    (a, b, c) (6,) to the fitted v0, v1 (4,) of a similar copy of the rest triangle, and
+    M0, M1 (F, 2, 2) giving v2 = M0 v0 + M1 v1 (M0 = (1 - x) I - y R90, M1 = x I + y R90,
+    (x, y) the rest v2 in the frame of edge 0 -> 1). Returns (fit, M0, M1)."""
     local = local_coordinates(rest, triangles)[:, 2]    # vertex 2 on edge 0 -> 1
     x = local[:, 0][:, None, None]
     y = local[:, 1][:, None, None]

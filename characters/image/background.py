@@ -26,6 +26,16 @@ DEFAULT_TOLERANCE_FLOOR = 32.0   # [0..255 RGB distance] cartoon edges antialias
 MAX_BACKGROUND_NOISE = 40.0  # [0..255] corner spread above which the background is not plain
 
 
+def require_cv2():
+    """OpenCV, imported on first use (connected components, contours, distance transforms)."""
+    try:
+        import cv2
+    except ImportError:
+        raise ImportError("image puppets need OpenCV to cut out and mesh pictures: "
+                          "pip install 'mop[image]'") from None
+    return cv2
+
+
 @dataclass(frozen=True)
 class Cutout:
     """The result of background removal.
@@ -126,7 +136,7 @@ def estimate_background(rgb: np.ndarray, *, patch: int | None = None):
 
 
 def _largest_component(foreground: np.ndarray) -> np.ndarray:
-    import cv2
+    cv2 = require_cv2()
     count, labels, stats, _ = cv2.connectedComponentsWithStats(
         foreground.astype(np.uint8), connectivity=8)
     if count <= 1:
@@ -144,7 +154,7 @@ def _fill_holes(mask: np.ndarray, max_hole_fraction: float,
     colour is within hole_tolerance: background showing through (between an arm and the body)
     is exactly the background colour, while character parts that are merely close to it (white
     eyes on a cream background) are not."""
-    import cv2
+    cv2 = require_cv2()
     holes = ~mask
     count, labels, stats, _ = cv2.connectedComponentsWithStats(holes.astype(np.uint8),
                                                                connectivity=4)
@@ -172,7 +182,7 @@ def feather_alpha(mask: np.ndarray, feather: float) -> np.ndarray:
     Feathering inward keeps the background colour out of the visible edge (no halo)."""
     if feather <= 0:
         return mask.astype(np.uint8) * 255
-    import cv2
+    cv2 = require_cv2()
     inside = cv2.distanceTransform(mask.astype(np.uint8), cv2.DIST_L2, 3)
     # a boundary pixel is at distance 1: it gets alpha 1/(feather+1) .. ramp to 1
     alpha = np.clip(inside / (feather + 1.0), 0.0, 1.0)
@@ -194,7 +204,7 @@ def remove_background(image: np.ndarray, *, tolerance: float | None = None,
         between an arm and the body goes)
     min_character_fraction : a largest part smaller than this fraction of the image is an error
     """
-    import cv2
+    cv2 = require_cv2()
     if feather < 0 or not np.isfinite(feather):
         raise ValueError(f"feather must be a finite width >= 0 [px], got {feather}")
     height, width = image.shape[:2]

@@ -3,7 +3,8 @@
 Built procedurally: ellipsoids (body segments, stubby legs, head, eyes) joined by a smooth union,
 minus a wedge for the mouth, meshed as a level set by manifold3d (its marching tetrahedra keep the
 triangles well shaped, which the medial skeleton and the springs both need). Units: metres; the
-creature is about 0.44 m long, a hand-puppet size.
+creature is about 0.44 m long, a hand-puppet size. Axes as mop's 3D renderer expects them: +y up,
+the head towards +x, its left side towards +z (the field below is written z-up and turned).
 
 ``python -m characters.medial_build.creature [DIR]`` rewrites the assets in characters/data/:
 ``medial_caterpillar.obj`` (surface), ``medial_caterpillar.joints.json`` (sections, planes,
@@ -24,7 +25,7 @@ DATA = Path(__file__).resolve().parent.parent / "data"
 
 _SEGMENTS_X = (0.0, 0.07, 0.14, 0.21)
 _HEAD = (0.30, 0.0, 0.085, 0.075, 0.066, 0.064)      # centre (x, y, z), radii (x, y, z) [m]
-_MOUTH_CORNER = (0.285, 0.072)                         # (x, z) of the back of the mouth [m]
+_MOUTH_CORNER = (0.285, 0.072)     # (x, height) of the back of the mouth [m]
 _LIP_ANGLES = (math.radians(14.0), math.radians(-16.0))   # upper and lower lip planes
 _BLEND = 0.022                                          # smooth-union width [m]
 
@@ -44,7 +45,7 @@ def _ellipsoids():
 
 
 def caterpillar_sdf(x: float, y: float, z: float, balls=_ellipsoids()) -> float:
-    """Signed distance-like field [m] of the caterpillar: positive inside."""
+    """Signed distance-like field [m] of the caterpillar, z up: positive inside."""
     inside = -1e9
     for cx, cy, cz, rx, ry, rz in balls:
         dx, dy, dz = (x - cx) / rx, (y - cy) / ry, (z - cz) / rz
@@ -75,8 +76,10 @@ def caterpillar_mesh(*, edge_length: float = 0.012):
     solid = manifold3d.Manifold.level_set(caterpillar_sdf, bounds, edge_length, 0.0,
                                           0.05 * edge_length)
     mesh = solid.to_mesh()
-    return trimesh.Trimesh(np.asarray(mesh.vert_properties[:, :3], dtype=np.float64),
-                           np.asarray(mesh.tri_verts, dtype=np.int64), process=True)
+    z_up = np.asarray(mesh.vert_properties[:, :3], dtype=np.float64)
+    # (x, y, z) z-up -> (x, z, -y) y-up: a proper rotation, so the winding stays outward
+    y_up = np.stack([z_up[:, 0], z_up[:, 2], -z_up[:, 1]], axis=1)
+    return trimesh.Trimesh(y_up, np.asarray(mesh.tri_verts, dtype=np.int64), process=True)
 
 
 def caterpillar_joints() -> JointSpec:
@@ -85,16 +88,16 @@ def caterpillar_joints() -> JointSpec:
     Positive angles pitch a section nose-up about its pivot: the front and the head lift, the
     tail dips; a positive jaw angle opens the mouth.
     """
-    lift = (0.0, -1.0, 0.0)
-    corner_x, corner_z = _MOUTH_CORNER
+    lift = (0.0, 0.0, 1.0)          # about +z: +x (towards the head) turns to +y (up)
+    corner_x, corner_height = _MOUTH_CORNER
     cuts = (
-        JointCut(section="body", names=("tail", "front"), point=(0.105, 0.0, 0.05),
-                 normal=(1.0, 0.0, 0.0), axis=lift, pivot=(0.105, 0.0, 0.05)),
-        JointCut(section="front", names=("chest", "head"), point=(0.252, 0.0, 0.06),
-                 normal=(1.0, 0.0, 0.0), axis=lift, pivot=(0.252, 0.0, 0.06)),
-        JointCut(section="head", names=("skull", "jaw"), point=(corner_x, 0.0, corner_z),
-                 normal=(0.0, 0.0, -1.0), axis=(0.0, 1.0, 0.0),
-                 pivot=(0.265, 0.0, corner_z)),
+        JointCut(section="body", names=("tail", "front"), point=(0.105, 0.05, 0.0),
+                 normal=(1.0, 0.0, 0.0), axis=lift, pivot=(0.105, 0.05, 0.0)),
+        JointCut(section="front", names=("chest", "head"), point=(0.252, 0.06, 0.0),
+                 normal=(1.0, 0.0, 0.0), axis=lift, pivot=(0.252, 0.06, 0.0)),
+        JointCut(section="head", names=("skull", "jaw"), point=(corner_x, corner_height, 0.0),
+                 normal=(0.0, -1.0, 0.0), axis=(0.0, 0.0, -1.0),
+                 pivot=(0.265, corner_height, 0.0)),
     )
     return JointSpec(root="body", cuts=cuts,
                      extras={"mesh": f"{NAME}.obj", "motion": f"{NAME}.motion.json"})

@@ -75,13 +75,32 @@ def internal_voronoi_mask(points, face_normals, vertex_faces, owner, corner_poin
     corner_points : (P, 3) float         the Voronoi point of each pair
     Returns ``(P,) bool``.
     """
-    offsets = corner_points - points[owner]                       # (P, 3)
-    faces = vertex_faces[owner]                                   # (P, K)
-    normals = face_normals[np.maximum(faces, 0)]                  # (P, K, 3)
-    facing = np.einsum("pkc,pc->pk", normals, offsets)            # (P, K)
-    # padded slots must not veto the point
-    behind = (facing < 0.0) | (faces < 0)
-    return behind.all(axis=1)
+    return _internal_mask(np.ascontiguousarray(points, dtype=np.float64),
+                          np.ascontiguousarray(face_normals, dtype=np.float64),
+                          np.ascontiguousarray(vertex_faces, dtype=np.int64),
+                          np.ascontiguousarray(owner, dtype=np.int64),
+                          np.ascontiguousarray(corner_points, dtype=np.float64))
+
+
+@njit(cache=True)
+def _internal_mask(points, face_normals, vertex_faces, owner, corner_points):
+    mask = np.empty(owner.shape[0], dtype=np.bool_)
+    for pair in range(owner.shape[0]):
+        vertex = owner[pair]
+        ox = corner_points[pair, 0] - points[vertex, 0]
+        oy = corner_points[pair, 1] - points[vertex, 1]
+        oz = corner_points[pair, 2] - points[vertex, 2]
+        inside = True
+        for k in range(vertex_faces.shape[1]):
+            face = vertex_faces[vertex, k]
+            if face < 0:   # padding
+                continue
+            if (face_normals[face, 0] * ox + face_normals[face, 1] * oy
+                    + face_normals[face, 2] * oz) >= 0.0:
+                inside = False
+                break
+        mask[pair] = inside
+    return mask
 
 
 def internal_voronoi_mask_reference(points, face_normals, vertex_faces, owner, corner_points):

@@ -118,7 +118,8 @@ def write_motion_preview(motion, path, *, fps: float = PREVIEW_FPS,
 def confusability_report(templates: dict, new_name: str) -> list[str]:
     """Lines saying how confusable take `new_name` is with the others, from
     followers.confusability(templates: {name: (T, D) array}) (imported here, lazily: mop is the
-    only package that may call into followers)."""
+    only package that may call into followers). Channels are z-scored over all the templates
+    first, as a session would, so that no channel dominates by its units."""
     import numpy as np
 
     if len(templates) < 2:
@@ -127,24 +128,37 @@ def confusability_report(templates: dict, new_name: str) -> list[str]:
     try:
         from followers import confusability
     except ImportError:
-        # TODO(followers): followers.confusability is written concurrently by the followers
-        # teammate; until it exists this report cannot be made.
+        # followers.confusability is written by the followers teammate; an install without it
+        # still records, and the comparison can be made later with `mop train`
         return ["confusability: followers.confusability is not available in this install; "
                 "the take is stored, compare later with `mop train`"]
-    result = confusability(dict(templates))
+    stacked = np.concatenate(list(templates.values()), axis=0)
+    shift = np.nanmean(stacked, axis=0)
+    scale = np.nanstd(stacked, axis=0)
+    scale = np.where(np.isfinite(scale) & (scale > 1e-12), scale, 1.0)
+    shift = np.where(np.isfinite(shift), shift, 0.0)
+    result = confusability({name: (values - shift) / scale
+                            for name, values in templates.items()})
     names = list(getattr(result, "names", templates))
     matrix = np.asarray(getattr(result, "matrix", result), dtype=float)
     if matrix.shape != (len(names), len(names)) or new_name not in names:
         return [f"confusability: unexpected result {type(result).__name__} "
                 f"{getattr(matrix, 'shape', '')}"]
     k = names.index(new_name)
-    lines = ["confusability with the performer's other takes (row: demonstration, column: "
-             "follower; higher = more confusable):"]
+    lines = [f"confusability of {new_name} with the performer's other takes (share of frames "
+             f"a follower accepts a demonstration, 0..1):",
+             f"  its own follower accepts it on {matrix[k, k]:.0%} of frames"]
+    decisions = getattr(result, "decisions", None)
+    if decisions is not None and np.shape(decisions) == (len(names), len(names) + 1):
+        lines[-1] += (f"; the bank picks it on {decisions[k, k]:.0%}, nothing on "
+                      f"{decisions[k, -1]:.0%}")
     others = sorted((j for j in range(len(names)) if j != k),
                     key=lambda j: -max(matrix[k, j], matrix[j, k]))
     for j in others:
-        lines.append(f"  {names[j]:<24} new as {names[j]}: {matrix[k, j]:.3f}   "
-                     f"{names[j]} as new: {matrix[j, k]:.3f}")
+        worst = max(matrix[k, j], matrix[j, k])
+        flag = "  <- too close: make one of them more distinct" if worst >= 0.5 else ""
+        lines.append(f"  {names[j]:<24} accepts the new action {matrix[k, j]:.2f}; the new "
+                     f"follower accepts it {matrix[j, k]:.2f}{flag}")
     return lines
 
 
@@ -167,9 +181,9 @@ def _load_motion(spec: str, store):
 class _Progress:
     """One terminal line, redrawn in place on a terminal, a line per second otherwise."""
 
-    def __init__(self, stream=sys.stdout):
-        self.stream = stream
-        self.tty = stream.isatty()
+    def __init__(self, stream=None):
+        self.stream = stream if stream is not None else sys.stdout
+        self.tty = self.stream.isatty()
         self.last = -1.0
 
     def show(self, text: str, *, now: float, force: bool = False) -> None:

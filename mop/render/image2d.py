@@ -327,10 +327,14 @@ def draw_mesh_preview(image: np.ndarray, vertices: np.ndarray, triangles: np.nda
             cv2.circle(canvas, (x, y), radius, (240, 120, 20), -1, cv2.LINE_AA)
         cv2.circle(canvas, (x, y), radius + 1, (255, 255, 255), thin, cv2.LINE_AA)
         scale = max(0.4, max(height, width) / 1300)
-        cv2.putText(canvas, name, (x + radius + 3, y - radius), cv2.FONT_HERSHEY_SIMPLEX, scale,
-                    (255, 255, 255), 3 * thin, cv2.LINE_AA)
-        cv2.putText(canvas, name, (x + radius + 3, y - radius), cv2.FONT_HERSHEY_SIMPLEX, scale,
-                    (20, 20, 20), thin, cv2.LINE_AA)
+        (text_width, text_height), _ = cv2.getTextSize(name, cv2.FONT_HERSHEY_SIMPLEX, scale, thin)
+        left = x + radius + 3
+        if left + text_width >= width:   # keep the label inside the picture
+            left = max(0, x - radius - 3 - text_width)
+        top = max(text_height + 2, y - radius)
+        for colour, weight in (((255, 255, 255), 3 * thin), ((20, 20, 20), thin)):
+            cv2.putText(canvas, name, (left, top), cv2.FONT_HERSHEY_SIMPLEX, scale, colour,
+                        weight, cv2.LINE_AA)
     return canvas
 
 

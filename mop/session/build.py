@@ -297,17 +297,17 @@ def _tracks(config: SessionConfig, character: CharacterConfig, puppet,
 
 
 def _outputs(config: SessionConfig, overrides: Overrides) -> list:
-    from .outputs import OscOutput, PngOutput, VideoOutput
+    from .outputs import BackgroundOutput, OscOutput, PngOutput, VideoOutput
     outputs = []
     video = overrides.video or config.outputs.video
     if video:
         background = (config.background_colour if config.background is not
                       Background.TRANSPARENT else (0, 0, 0))
-        outputs.append(VideoOutput(video, fps=config.fps, size=config.size,
-                                   background=background))
+        outputs.append(BackgroundOutput(VideoOutput(video, fps=config.fps, size=config.size,
+                                                    background=background)))
     png = overrides.png or config.outputs.png
     if png:
-        outputs.append(PngOutput(png, fps=config.fps, size=config.size))
+        outputs.append(BackgroundOutput(PngOutput(png, fps=config.fps, size=config.size)))
     osc = overrides.osc or config.outputs.osc
     if osc:
         outputs.append(OscOutput(*osc))

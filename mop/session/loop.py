@@ -155,7 +155,8 @@ class Track:
                  rest: Mapping[str, np.ndarray], *, blend: float):
         self.performer = performer
         self.motions = dict(motions)
-        self.rest = {k: np.asarray(v, dtype=np.float64) for k, v in rest.items()}
+        self.rest = {k: float(np.ravel(v)[0]) if np.size(v) == 1 else np.asarray(v, float)
+                     for k, v in rest.items()}
         self.blend = float(blend)
         self.current: str | None = None
         self.progress = 0.0
@@ -175,7 +176,8 @@ class Track:
         self.blend_start = -math.inf
 
     def update(self, t: float, state: FollowState, out: dict) -> None:
-        """Write this track's targets for session time t [s] into `out` {target: (c,) float}."""
+        """Write this track's targets for session time t [s] into `out` {target: float or (c,)
+        float} (one-component channels as floats)."""
         active = state.action if state.action in self.motions else None
         if active != self.current:
             self.blend_from = self.last
@@ -189,7 +191,10 @@ class Track:
             self.progress = min(max(state.progress, 0.0), 1.0)
             sample = motion.sample(self.progress * motion.duration)
             for channel, target in channels:
-                goal[target] = np.asarray(sample[channel], dtype=np.float64)
+                value = sample[channel]
+                # a one-component channel (finger bend, joint angle) is a plain float target
+                goal[target] = float(value[0]) if len(value) == 1 else np.asarray(
+                    value, dtype=np.float64)
         emitted: dict[str, np.ndarray] = {}
         if weight < 1.0:
             for target, start in self.blend_from.items():

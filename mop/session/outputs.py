@@ -126,3 +126,57 @@ class OscOutput:
         sock = getattr(self.client, "_sock", None)  # UDPClient has no public close()
         if sock is not None:
             sock.close()
+
+
+class BackgroundOutput:
+    """Runs another output's writes in a worker thread, in order, so encoding a frame overlaps
+    with simulating and rendering the next one (OpenCV's encoder and NumPy release the GIL).
+
+    `write` copies the frame (the stage reuses its buffer) and queues it; with `queue_size`
+    frames waiting it blocks, so a slow disk slows the show down rather than eating memory.
+    `close` drains the queue, then closes the inner output."""
+
+    def __init__(self, inner, *, queue_size: int = 6):
+        import queue
+        import threading
+        self.inner = inner
+        self.queue: queue.Queue = queue.Queue(maxsize=queue_size)
+        self.error: BaseException | None = None
+        self.thread = threading.Thread(target=self._work, name=f"mop-{type(inner).__name__}",
+                                       daemon=True)
+        self.thread.start()
+        self.closed = False
+
+    @property
+    def frames(self) -> int:
+        return self.inner.frames
+
+    @property
+    def path(self):
+        return getattr(self.inner, "path", None) or getattr(self.inner, "folder", None)
+
+    def _work(self) -> None:
+        while True:
+            item = self.queue.get()
+            if item is None:
+                return
+            if self.error is None:
+                try:
+                    self.inner.write(*item[:2], repeat=item[2])
+                except BaseException as error:  # reported by the next write or close
+                    self.error = error
+
+    def write(self, frame, state, *, repeat: bool = False) -> None:
+        if self.error is not None:
+            raise self.error
+        self.queue.put((None if frame is None else frame.copy(), state, repeat))
+
+    def close(self) -> None:
+        if self.closed:
+            return
+        self.closed = True
+        self.queue.put(None)
+        self.thread.join()
+        self.inner.close()
+        if self.error is not None:
+            raise self.error

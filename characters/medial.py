@@ -38,7 +38,7 @@ from .medial_build.constraints import BoneSpringReduction
 from .medial_build.joints import JointCut, JointSpec, JointTree
 from .medial_build.mesh_input import load_closed_mesh
 from .medial_build.skeleton import Skeleton, skeletonize
-from .model import MassSpring, SpringState
+from .model import MassSpring
 
 log = logging.getLogger(__name__)
 
@@ -116,7 +116,8 @@ def _as_medial_material(material) -> MedialMaterial:
                  "velocity_damping"}
         unknown = set(material) - known
         if unknown:
-            raise ValueError(f"material has unknown keys {sorted(unknown)}; expected {sorted(known)}")
+            raise ValueError(f"material has unknown keys {sorted(unknown)}; expected "
+                             f"{sorted(known)}")
         values = {"name": "custom", "min_factor": 0.8, **material}
         missing = known - set(values)
         if missing:

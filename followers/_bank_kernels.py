@@ -13,9 +13,9 @@ import numpy as np
 
 @nb.njit(cache=True)
 def bank_decide(frame_loglik, xs, observed, n_obs, background_mean, background_weight,
-                background_log_norm, cap, decay, evidence_cap, lead_cap, fit_floor, recent, fit, fit_weight,
-                posterior, thresholds, enter_margin, leave_margin, switch_posterior, state,
-                moments, main, lengths, progress, variance):
+                background_log_norm, cap, decay, evidence_cap, lead_cap, fit_floor, recent, fit,
+                fit_weight, posterior, thresholds, enter_margin, leave_margin, switch_posterior,
+                state, moments, main, lengths, progress, variance):
     """Update the bank's decision after one frame.
 
     frame_loglik (2, K) float: each follower's log-likelihood of this frame under its own

@@ -73,6 +73,10 @@ class ForwardEngine:
         # advance_tail[m, r] = P(advance >= r): what lands on the absorbing last state
         self.advance_tail = np.ascontiguousarray(
             np.cumsum(self.advance[:, ::-1], axis=1)[:, ::-1])
+        nonzero = self.advance > 0
+        self.advance_range = np.ascontiguousarray(np.stack(
+            [nonzero.argmax(axis=1), nonzero.shape[1] - 1 - nonzero[:, ::-1].argmax(axis=1)],
+            axis=1), dtype=np.int64)
         self.speed_change = np.ascontiguousarray(transitions.speed_change, dtype=np.float64)
         self.initial_speed = np.ascontiguousarray(transitions.initial_speed, dtype=np.float64)
         self.restart = float(transitions.restart)
@@ -127,7 +131,8 @@ class ForwardEngine:
             x, self.lower, self.upper, self.templates, self.offsets, self.lengths,
             self.half_windows, self.weights, self.state_log_norm, self.state_log_norm_sum,
             self.cap, self.dual, self.prune,
-            self.advance, self.advance_tail, self.speed_change, self.initial_speed, self.restart,
+            self.advance, self.advance_tail, self.advance_range, self.speed_change,
+            self.initial_speed, self.restart,
             self.alpha, self.rowsum, self.logb, self.support, self.moments, self.main, self.fresh,
             self.loglik, self.frame_loglik, self._xs, self._observed, self._mix)
 
@@ -143,7 +148,8 @@ class ForwardEngine:
             X, self.lower, self.upper, self.templates, self.offsets, self.lengths,
             self.half_windows, self.weights, self.state_log_norm, self.state_log_norm_sum,
             self.cap, self.dual, self.prune,
-            self.advance, self.advance_tail, self.speed_change, self.initial_speed, self.restart,
+            self.advance, self.advance_tail, self.advance_range, self.speed_change,
+            self.initial_speed, self.restart,
             self.alpha, self.rowsum, self.logb, self.support, self.moments, self.main, self.fresh,
             self.loglik, self.frame_loglik, self._xs, self._observed, self._mix,
             progress, variance, loglik)

@@ -11,14 +11,21 @@ Layout shared by every kernel (K templates stacked, ``S = sum(T_k)`` states in a
 - ``support (K, 2, 2) int64``: first and last state of each track's support (empty: last < first).
 - ``moments (K, 2, 3) float64``: mass, mean state and state variance of each track.
 - ``main (K,) int64``: which track (0 or 1) is the main one; ``fresh (K,) bool``: no frame yet.
-- ``loglik (K,) float64``: log-likelihood of everything since reset; ``frame_loglik (K,)``: of
-  the last frame alone.
+- ``loglik (K,) float64``: log-likelihood of everything since reset; ``frame_loglik (2, K)``:
+  of the last frame alone, under the follower's emission model (row 0) and under the bank's
+  recognition model (row 1; a copy of row 0 unless ``dual``).
 
 The emission of state ``j`` is ``sum over observed channels d`` of
-``-0.5 * min(w[j, d] * (x[d] - template[j, d])**2, cap) - 0.5 * log(2 pi sigma[j, d]**2)``
-with ``w = 1 / sigma**2`` (sigma per state and channel: ``weights, log_norm (S, D)``); ``cap = inf`` is the plain Gaussian of the paper (equation 1),
-a finite cap bounds what one wild channel can do. Each frame is scaled by the largest emission,
-so nothing under- or overflows however long the run.
+``-0.5 * min(w[e, j, d] * (x[d] - template[j, d])**2, cap) - 0.5 * log(2 pi sigma[e, j, d]**2)``
+with ``w = 1 / sigma**2``, sigma per model ``e`` (0: the follower's, 1: recognition), state and
+channel: ``weights, log_norm (2, S, D)``. ``cap = inf`` is the plain Gaussian of the paper
+(equation 1); a finite cap bounds what one wild channel can do. Each frame is scaled by the
+largest emission, so nothing under- or overflows however long the run.
+
+Windowing (MOP equations 6-7): before each transition a track keeps only the states within
+``p`` of its rounded mean (shifted to stay inside the template); the mass outside is dropped and
+the per-frame normaliser ``k`` renormalises what remains. The entry track's window is always the
+first ``2p + 1`` states. With ``p >= T`` and no restart this is the full forward algorithm.
 """
 from __future__ import annotations
 
@@ -26,9 +33,6 @@ import math
 
 import numba as nb
 import numpy as np
-
-_LOG_2PI = math.log(2.0 * math.pi)
-
 
 @nb.njit(cache=True)
 def prepare_frame(x, lower, upper, xs, observed):
@@ -102,10 +106,11 @@ def _clear_rows(alpha, rowsum, track, first, last):
 
 @nb.njit(cache=True)
 def _predict_track(alpha, rowsum, track, off, T, lo, hi, keep_scale, advance, advance_tail,
-                   speed_change, mix):
+                   advance_range, speed_change, mix):
     """Transition one track in place: truncate to [lo, hi] (state indices within the template),
     mix speed levels, advance. Returns the last target state. ``keep_scale`` multiplies the mass
-    (1 - restart). ``mix`` is a (M,) scratch."""
+    (1 - restart). ``advance_range (M, 2)``: first and last nonzero advance of each level.
+    ``mix`` is a (M,) scratch."""
     M = alpha.shape[2]
     A = advance.shape[1] - 1
     if M > 1:
@@ -127,22 +132,32 @@ def _predict_track(alpha, rowsum, track, off, T, lo, hi, keep_scale, advance, ad
     for j in range(top, lo - 1, -1):
         r = off + j
         total = 0.0
-        for m in range(M):
-            s = 0.0
-            if j == T - 1:
-                # absorbing end: every advance that would pass the last state lands on it
+        if j == T - 1:
+            # absorbing end: every advance that would pass the last state lands on it
+            for m in range(M):
+                s = 0.0
                 for i in range(max(lo, T - 1 - A), min(hi, T - 1) + 1):
                     s += alpha[track, off + i, m] * advance_tail[m, T - 1 - i]
-            else:
-                for a in range(A + 1):
-                    i = j - a
-                    if i < lo:
-                        break
-                    if i <= hi:
-                        s += alpha[track, off + i, m] * advance[m, a]
-            s *= keep_scale
-            alpha[track, r, m] = s
-            total += s
+                s *= keep_scale
+                alpha[track, r, m] = s
+                total += s
+        else:
+            for m in range(M):
+                s = 0.0
+                # only the advances level m can make (two neighbours for a fractional speed)
+                a_first = advance_range[m, 0]
+                a_last = advance_range[m, 1]
+                i = j - a_last
+                if i < lo:
+                    a_last = j - lo
+                i = j - a_first
+                if i > hi:
+                    a_first = j - hi
+                for a in range(a_first, a_last + 1):
+                    s += alpha[track, r - a, m] * advance[m, a]
+                s *= keep_scale
+                alpha[track, r, m] = s
+                total += s
         rowsum[track, r] = total
     return top
 
@@ -225,18 +240,20 @@ def _predictive_loglik(rowsum, logb, model, support, k, off):
 
 @nb.njit(cache=True)
 def template_step(k, templates, offsets, lengths, half_windows, weights, log_norm, log_norm_sum,
-                  xs, observed, n_obs, cap, dual, prune, advance, advance_tail, speed_change,
-                  initial_speed, restart, alpha, rowsum, logb, support, moments, main, fresh,
-                  loglik, frame_loglik, mix):
+                  xs, observed, n_obs, cap, dual, prune, advance, advance_tail, advance_range,
+                  speed_change, initial_speed, restart, alpha, rowsum, logb, support, moments,
+                  main, fresh, loglik, frame_loglik, mix):
     """One frame of the windowed forward algorithm for template ``k`` (see the module docstring
-    for the layout). ``weights (S, D)``: 1 / sigma**2 per state; ``log_norm (S, D)``: -0.5 log(2 pi
-    sigma**2) per state, ``log_norm_sum (S,)`` its sum over channels; ``half_windows (K,)``: window half-width p in states (>= T: full forward);
-    ``prune``: 0, or a mass below which states at the edges of a track's support are dropped
-    (beam pruning; the support then stays inside the window but is often much narrower). ``mix (M,)``: scratch."""
+    for the layout). ``weights (2, S, D)``: 1 / sigma**2 per model and state; ``log_norm
+    (2, S, D)``: -0.5 log(2 pi sigma**2), ``log_norm_sum (2, S)`` its sum over channels;
+    ``dual``: score frames with model 1 too; ``half_windows (K,)``: window half-width p in
+    states (>= T: full forward); ``prune``: 0, or a mass below which states at the edges of a
+    track's support are dropped (beam pruning: the support stays inside the window but is often
+    much narrower). ``advance_range (M, 2)``: first and last nonzero advance per level;
+    ``mix (M,)``: scratch."""
     off = offsets[k]
     T = lengths[k]
     M = alpha.shape[2]
-    A = advance.shape[1] - 1
     p = half_windows[k]
     mt = main[k]
     et = 1 - mt
@@ -298,7 +315,7 @@ def template_step(k, templates, offsets, lengths, half_windows, weights, log_nor
                 support[k, t, 1] = 0
                 continue
             top = _predict_track(alpha, rowsum, t, off, T, kept_lo, kept_hi, keep, advance,
-                                 advance_tail, speed_change, mix)
+                                 advance_tail, advance_range, speed_change, mix)
             support[k, t, 0] = kept_lo
             support[k, t, 1] = top
         if use_entry:
@@ -447,34 +464,35 @@ def template_step(k, templates, offsets, lengths, half_windows, weights, log_nor
 
 @nb.njit(cache=True)
 def bank_step(x, lower, upper, templates, offsets, lengths, half_windows, weights, log_norm,
-              log_norm_sum, cap, dual, prune, advance, advance_tail, speed_change, initial_speed,
-              restart, alpha, rowsum, logb, support, moments, main, fresh, loglik, frame_loglik,
-              xs, observed, mix):
+              log_norm_sum, cap, dual, prune, advance, advance_tail, advance_range, speed_change,
+              initial_speed, restart, alpha, rowsum, logb, support, moments, main, fresh, loglik,
+              frame_loglik, xs, observed, mix):
     """One frame for all K templates. ``x (D,)`` is the raw input frame. Returns the number of
     observed channels."""
     n_obs = prepare_frame(x, lower, upper, xs, observed)
     for k in range(offsets.shape[0]):
         template_step(k, templates, offsets, lengths, half_windows, weights, log_norm,
                       log_norm_sum, xs, observed, n_obs, cap, dual, prune, advance, advance_tail,
-                      speed_change, initial_speed, restart, alpha, rowsum, logb, support, moments,
-                      main, fresh, loglik, frame_loglik, mix)
+                      advance_range, speed_change, initial_speed, restart, alpha, rowsum, logb,
+                      support, moments, main, fresh, loglik, frame_loglik, mix)
     return n_obs
 
 
 @nb.njit(cache=True)
 def follow_sequence(X, lower, upper, templates, offsets, lengths, half_windows, weights, log_norm,
-                    log_norm_sum, cap, dual, prune, advance, advance_tail, speed_change, initial_speed,
-                    restart, alpha, rowsum, logb, support, moments, main, fresh, loglik,
-                    frame_loglik, xs, observed, mix, out_progress, out_variance, out_loglik):
+                    log_norm_sum, cap, dual, prune, advance, advance_tail, advance_range,
+                    speed_change, initial_speed, restart, alpha, rowsum, logb, support, moments,
+                    main, fresh, loglik, frame_loglik, xs, observed, mix, out_progress,
+                    out_variance, out_loglik):
     """Run ``bank_step`` over the rows of ``X (N, D)``; write each template's main-track
     progress and variance (in [0, 1] units) and cumulative log-likelihood into
     ``out_* (N, K)``."""
     K = offsets.shape[0]
     for n in range(X.shape[0]):
         bank_step(X[n], lower, upper, templates, offsets, lengths, half_windows, weights,
-                  log_norm, log_norm_sum, cap, dual, prune, advance, advance_tail, speed_change,
-                  initial_speed, restart, alpha, rowsum, logb, support, moments, main, fresh,
-                  loglik, frame_loglik, xs, observed, mix)
+                  log_norm, log_norm_sum, cap, dual, prune, advance, advance_tail, advance_range,
+                  speed_change, initial_speed, restart, alpha, rowsum, logb, support, moments,
+                  main, fresh, loglik, frame_loglik, xs, observed, mix)
         for k in range(K):
             scale = 1.0 / (lengths[k] - 1)
             t = main[k]

@@ -283,7 +283,8 @@ class FollowerBank:
         _bank_kernels.bank_decide(
             engine.frame_loglik, engine._xs, engine._observed, n_obs, self._background_mean,
             self._background_weight, self._background_log_norm, engine.cap, self._decay,
-            EVIDENCE_CAP, LEAD_CAP, FIT_FLOOR, self._recent, self._fit, self._fit_weight, self._posterior, self._thresholds,
+            EVIDENCE_CAP, LEAD_CAP, FIT_FLOOR, self._recent, self._fit, self._fit_weight,
+            self._posterior, self._thresholds,
             self._enter_margin, self._leave_margin, self.switch_posterior, self._state,
             engine.moments, engine.main, engine.lengths, self._progress, self._variance)
         self._publish()

@@ -43,7 +43,8 @@ class Confusability:
         i, j = np.unravel_index(int(np.argmax(off)), off.shape)
         return self.names[i], self.names[j], float(self.matrix[i, j])
 
-    def plot(self, ax=None, *, title: str = "How strongly each follower accepts each demonstration"):
+    def plot(self, ax=None, *,
+             title: str = "How strongly each follower accepts each demonstration"):
         """Draw the matrix on a matplotlib axis (made if None); returns the axis."""
         try:
             import matplotlib.pyplot as plt

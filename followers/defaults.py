@@ -1,17 +1,18 @@
 """Defaults estimated from the templates themselves, and template validation.
 
-- **sigma** (per channel): ``SIGMA_FRACTION`` times the channel's standard deviation over all
-  frames of the template(s), floored at ``SIGMA_FLOOR`` times the root-mean-square of those
-  deviations (so a channel that never moves in the demonstration does not make every other
-  value impossible), and 1.0 when the template does not move at all. A performer repeating a
-  demonstration rarely differs from it by less than a quarter of the channel's range of motion;
-  a much smaller sigma makes the follower brittle, a much larger one blurs positions.
-- **window** (half-width p, in states): ``ceil(WINDOW_FRACTION * T)``, at least
-  ``WINDOW_MIN`` and at most T. The posterior of a follower that is on track is a few states
-  wide; p only has to hold it through ambiguous stretches (a held pose), which in
-  demonstrations of gestures rarely exceed a fifth of the template. The default ``"speed"``
-  transitions also shrink the window to the posterior mean +- 6 standard deviations while the
-  follower is confident, which is what makes large banks cheap.
+- **sigma** (per channel, the same for every state): ``SIGMA_FRACTION`` (0.25) times the
+  channel's standard deviation over all frames of the template (of all templates, in a bank),
+  floored at ``SIGMA_FLOOR`` (0.05) times the root-mean-square of those deviations (so a channel
+  that never moves in the demonstration does not make every other value impossible), and 1.0
+  when the template does not move at all. A performer repeating a demonstration rarely differs
+  from it by less than a quarter of the channel's range of motion; a much smaller sigma makes
+  the follower brittle, a much larger one blurs positions (measured on GunPoint: 0.15-0.4 all
+  give median errors near 1 %).
+- **window** (half-width p, in states): ``ceil(WINDOW_FRACTION * T)`` (a fifth of the
+  template), at least ``WINDOW_MIN`` (8) and at most T. The posterior of a follower that is on
+  track is a few states wide; p only has to hold it through ambiguous stretches (a held pose),
+  which in demonstrations of gestures rarely exceed a fifth of the template. With the default
+  ``"speed"`` transitions, beam pruning then keeps only the states that matter inside it.
 """
 from __future__ import annotations
 
@@ -22,9 +23,7 @@ import numpy as np
 SIGMA_FRACTION = 0.25
 SIGMA_FLOOR = 0.05
 LOCAL_FRACTION = 0.05
-LOCAL_WEIGHT = 0.0
 RECOGNITION_FRACTION = 0.5
-RECOGNITION_LOCAL = 0.0
 WINDOW_FRACTION = 0.2
 WINDOW_MIN = 8
 
@@ -76,40 +75,43 @@ def channel_spread(templates: list[np.ndarray]) -> np.ndarray:
     return np.sqrt(square / count)
 
 
-def default_sigma(template: np.ndarray, *, pooled: list[np.ndarray] | None = None) -> np.ndarray:
+def default_sigma(template: np.ndarray, *, pooled: list[np.ndarray] | None = None,
+                  local: float = 0.0) -> np.ndarray:
     """Per-state, per-channel sigma estimated from a template.
 
     template : (T, D) float (validated); pooled : optional list of (T_k, D) templates whose
     channel spreads set the base level (a bank passes all its templates, so every follower
-    measures distance the same way). Returns (T, D) float [input units]."""
+    measures distance the same way). local : float >= 0: also add this times the template's
+    local variance over +-``LOCAL_FRACTION`` of its length (0, the default, for gestures; about
+    1 suits repetitive activities, whose repetitions never line up frame by frame, at the cost
+    of blurrier positions). Returns (T, D) float [input units]."""
     spread = channel_spread(pooled if pooled else [template])
     rms = float(np.sqrt(np.mean(spread ** 2)))
     if rms <= 0.0:
         return np.ones_like(template)
     base = SIGMA_FRACTION * np.maximum(spread, SIGMA_FLOOR * rms)
     var = np.broadcast_to(base ** 2, template.shape).copy()
-    if LOCAL_WEIGHT > 0:
+    if local > 0:
         half = max(1, int(round(LOCAL_FRACTION * template.shape[0])))
-        var += LOCAL_WEIGHT * local_variance(template, half)
+        var += float(local) * local_variance(template, half)
     return np.sqrt(var)
 
 
 def recognition_sigma(template: np.ndarray, sigma: np.ndarray) -> np.ndarray:
-    """Sigma of the bank's recognition model for one template (see ``FollowerBank``).
+    """Sigma of the bank's recognition score for one template (see ``FollowerBank``).
 
-    Recognising *which* action is performed must tolerate what following does not: another
-    performance of an action differs from the demonstration in timing detail and intensity.
-    Per state: the follower's sigma, at least ``RECOGNITION_FRACTION`` of the template's own
-    channel spread, plus the template's local variance over +-``LOCAL_FRACTION`` of its length
-    (a state may be met a little earlier or later than demonstrated).
+    Recognising *which* action is performed must tolerate what following need not: another
+    performance of an action differs from the demonstration in intensity as well as timing. Per
+    state: the follower's sigma, but at least ``RECOGNITION_FRACTION`` of the template's own
+    channel spread (floored like the default sigma).
 
     template : (T, D) float; sigma : (T, D) float. Returns (T, D) float [input units]."""
     spread = template.std(axis=0)
     rms = float(np.sqrt(np.mean(spread ** 2)))
-    own = RECOGNITION_FRACTION * np.maximum(spread, SIGMA_FLOOR * rms) if rms > 0 else spread
-    base = np.maximum(sigma, own[None, :])
-    half = max(1, int(round(LOCAL_FRACTION * template.shape[0])))
-    return np.sqrt(base ** 2 + RECOGNITION_LOCAL * local_variance(template, half))
+    if rms <= 0.0:
+        return sigma.copy()
+    own = RECOGNITION_FRACTION * np.maximum(spread, SIGMA_FLOOR * rms)
+    return np.maximum(sigma, own[None, :])
 
 
 def default_window(length: int) -> int:

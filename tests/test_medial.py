@@ -40,7 +40,7 @@ def real(request, duck, bunny):
     return {"duck": duck, "bunny": bunny}[request.param]
 
 
-# --- skeleton ----------------------------------------------------------------------------------
+# --- skeleton ------------------------------------------------------------------------------------
 
 @pytest.mark.realdata
 def test_one_skeletal_point_per_vertex_same_connectivity(real):
@@ -168,7 +168,7 @@ def test_material_thickness_scales_bone_springs(bunny):
     assert len(plastic.dynamic_vertices) == 0 and plastic.model.fixed.all()
 
 
-# --- self-intersections ---------------------------------------------------------------------------
+# --- self-intersections --------------------------------------------------------------------------
 
 def crossing_pairs_reference(vertices, faces):
     """Every face pair (no shared vertex) tested with the same segment test, no broad phase."""
@@ -217,7 +217,7 @@ def test_duck_small_self_intersection_is_repaired():
     assert moved.max() < mesh_input.SMALL_INTERSECTION * edge
 
 
-# --- joints geometry --------------------------------------------------------------------------------
+# --- joints geometry -----------------------------------------------------------------------------
 
 def test_rotation_matrix_matches_scipy(rng):
     from scipy.spatial.transform import Rotation
@@ -298,7 +298,7 @@ def test_joint_spec_json_round_trip(tmp_path):
     assert loaded.extras == {"motion": "x.motion.json"}
 
 
-# --- the shipped creature ----------------------------------------------------------------------------
+# --- the shipped creature ------------------------------------------------------------------------
 
 @pytest.fixture(scope="module")
 def creature():
@@ -316,7 +316,8 @@ def test_shipped_creature_has_its_joint_tree(creature):
     assert leaves == {"tail", "chest", "skull", "jaw"}
     # every motion channel of the shipped clip addresses a section
     from characters import Motion
-    motion = Motion.load(os.path.join(os.path.dirname(creature_path()), "medial_caterpillar.motion.json"))
+    folder = os.path.dirname(creature_path())
+    motion = Motion.load(os.path.join(folder, "medial_caterpillar.motion.json"))
     assert set(motion.channel_names) <= set(creature.target_names)
     assert creature.mesh.is_volume
     assert creature.skeleton_info.fallback.sum() == 0
@@ -344,7 +345,7 @@ def test_shipped_creature_regenerates_identically(tmp_path):
     assert new.volume == pytest.approx(old.volume, rel=1e-6)
 
 
-# --- bad input ------------------------------------------------------------------------------------------
+# --- bad input -----------------------------------------------------------------------------------
 
 def test_open_mesh_is_refused():
     sphere = trimesh.creation.icosphere(2)
@@ -380,6 +381,16 @@ def test_inside_out_mesh_is_repaired():
 def test_too_coarse_mesh_is_refused():
     with pytest.raises(ValueError, match="too coarse: 8 vertices"):
         MedialObject.from_mesh(trimesh.creation.box())
+
+
+def test_mesh_too_coarse_for_its_curvature_is_refused_and_subdividing_helps():
+    # a cone is only its rim, apex and base centre: no internal Voronoi point for most vertices
+    cone = trimesh.creation.cone(radius=0.5, height=1.0, sections=32)
+    with pytest.raises(ValueError, match="too coarse for its curvature: 97% of its 34 vertices"):
+        MedialObject.from_mesh(cone)
+    vertices, faces = trimesh.remesh.subdivide_to_size(cone.vertices, cone.faces, 0.1)
+    obj = MedialObject.from_mesh(trimesh.Trimesh(vertices, faces))
+    assert obj.skeleton_info.fallback.mean() < 0.05
 
 
 def test_self_intersecting_mesh_is_refused():

@@ -140,7 +140,7 @@ def wait_for_line(stream, pattern, timeout):
     raise AssertionError(f"no line matching {pattern!r} within {timeout} s; got {seen[-10:]}")
 
 
-def test_ctrl_c_leaves_a_playable_video(tmp_path):
+def test_timing_on_request_and_ctrl_c_leaves_a_playable_video(tmp_path):
     import cv2
     path = write_session(tmp_path)
     video = tmp_path / "show.mp4"
@@ -148,6 +148,8 @@ def test_ctrl_c_leaves_a_playable_video(tmp_path):
     try:
         wait_for_line(process.stderr, r"^frame (\d+) ", timeout=60)
         wait_for_line(process.stderr, r"^frame (\d+) ", timeout=10)   # ~2 s of show
+        process.send_signal(signal.SIGUSR1)                      # timing on request
+        wait_for_line(process.stderr, r"^\s+simulate\s+[\d.]+", timeout=10)
         process.send_signal(signal.SIGINT)
         out, err = process.communicate(timeout=30)
     finally:

@@ -216,3 +216,58 @@ def test_opaque_fast_path_matches_general_path(rng):
     blend_over(general, layer, -3, 14)
     assert np.abs(fast.astype(int) - general.astype(int)).max() <= 1
     assert (fast[..., 3] == 255).all()
+
+
+class SlowRenderer:
+    """Draws the stand-in with the fallback mesh renderer, then takes `delay` seconds more (a
+    stand-in for an expensive 3D render)."""
+
+    def __init__(self, puppet, delay):
+        from mop.render.compose import MeshLayerRenderer
+        self.inner = MeshLayerRenderer(puppet.model.rest_positions, puppet.faces, height=40)
+        self.delay = delay
+
+    def render(self, puppet):
+        import time
+        time.sleep(self.delay)
+        return self.inner.render(puppet)
+
+
+def standin_session(mode, *, delay):
+    from followers import FollowerBank
+    from mop.session.loop import CharacterRuntime, Session
+    from session_standin import StripPuppet
+    u = np.linspace(0.0, 1.0, 40)[:, None]
+    template = np.sin(np.pi * u) ** 2
+    show = np.concatenate([template, template, template])
+    feed = TakeFeed(np.arange(len(show)) / 25.0, show, ("x",), loop=True)
+    performer = PerformerRuntime("p", feed, FollowerBank({"bump": template}), channels=("x",))
+    motion = Motion({"tip": ([0.0, 1.6], [[0.0], [2.0]])})
+    puppet = StripPuppet(("tip",))
+    character = CharacterRuntime("c", puppet, SlowRenderer(puppet, delay), tracks=[
+        Track("p", {"bump": (motion, (("tip", "tip"),))}, {"tip": 0.0}, blend=0.2)])
+    return Session([performer], [character], fps=25, mode=mode, stage=Stage((64, 48), (0, 0, 0)))
+
+
+def test_live_mode_keeps_real_time_by_dropping_renders():
+    import time
+    session = standin_session("live", delay=0.06)          # a render takes 1.5 frame periods
+    start = time.monotonic()
+    report = session.run(duration=2.0)
+    wall = time.monotonic() - start
+    assert wall == pytest.approx(2.0, abs=0.4)              # real time was kept ...
+    assert report.frames >= 40                               # ... every frame was simulated
+    assert report.dropped > 0 and report.rendered < report.frames
+    assert report.rendered + report.dropped >= report.frames
+    assert report.stages["simulate"]["count"] + (report.dropped - (
+        report.rendered + report.dropped - report.frames)) >= report.frames - 5
+
+
+def test_replay_mode_runs_faster_than_real_time_and_renders_every_frame():
+    import time
+    session = standin_session("replay", delay=0.0)
+    start = time.monotonic()
+    report = session.run(duration=4.0)
+    assert time.monotonic() - start < 4.0
+    assert report.frames == 100 and report.rendered == 100 and report.dropped == 0
+    assert session.performers[0].seen == {"bump"}

@@ -238,14 +238,11 @@ def _collapse(v, u, faces, face_alive, vf, vf_n, q):
 
 
 @njit(**_JIT)
-def decimate_kernel(vertices, faces, locked, target_count, lam, cos_tau, inv_h, area_floor,
-                    capacity):
-    """Half-edge collapse decimation; returns (alive (V,) bool, face_alive (F,) bool,
-    faces (F, 3) int64 rewritten, removed count, stopped_early)."""
+def _setup(vertices, faces, capacity):
+    """Vertex -> face incidence (vf (V, capacity), vf_n (V,)) and per-vertex plane quadrics
+    q (V, 10), as in plane_quadrics."""
     vertex_count = vertices.shape[0]
     face_count = faces.shape[0]
-    faces = faces.copy()
-    face_alive = np.ones(face_count, dtype=np.bool_)
     vf = np.full((vertex_count, capacity), -1, dtype=np.int64)
     vf_n = np.zeros(vertex_count, dtype=np.int64)
     for f in range(face_count):
@@ -254,7 +251,6 @@ def decimate_kernel(vertices, faces, locked, target_count, lam, cos_tau, inv_h, 
             if vf_n[w] < capacity:
                 vf[w, vf_n[w]] = f
                 vf_n[w] += 1
-    # quadrics
     q = np.zeros((vertex_count, 10))
     for f in range(face_count):
         a = vertices[faces[f, 0]]
@@ -272,6 +268,33 @@ def decimate_kernel(vertices, faces, locked, target_count, lam, cos_tau, inv_h, 
                 row += 1
         for c in range(3):
             q[faces[f, c]] += qq
+    return vf, vf_n, q
+
+
+@njit(**_JIT)
+def removal_cost_kernel(vertices, faces, locked, lam, cos_tau, inv_h, area_floor, capacity):
+    """Initial removal priority of every vertex: cost (V,) and best neighbour (V,) (-1: none)."""
+    vf, vf_n, q = _setup(vertices, faces, capacity)
+    nb_v = np.empty(2 * capacity + 2, dtype=np.int64)
+    nb_u = np.empty(2 * capacity + 2, dtype=np.int64)
+    cost = np.full(vertices.shape[0], np.inf)
+    target = np.full(vertices.shape[0], -1, dtype=np.int64)
+    for v in range(vertices.shape[0]):
+        cost[v], target[v] = _evaluate(v, vertices, faces, vf, vf_n, q, locked, lam, cos_tau,
+                                       inv_h, area_floor, nb_v, nb_u)
+    return cost, target
+
+
+@njit(**_JIT)
+def decimate_kernel(vertices, faces, locked, target_count, lam, cos_tau, inv_h, area_floor,
+                    capacity):
+    """Half-edge collapse decimation; returns (alive (V,) bool, face_alive (F,) bool,
+    faces (F, 3) int64 rewritten, removed count, stopped_early)."""
+    vertex_count = vertices.shape[0]
+    face_count = faces.shape[0]
+    faces = faces.copy()
+    face_alive = np.ones(face_count, dtype=np.bool_)
+    vf, vf_n, q = _setup(vertices, faces, capacity)
     alive = vf_n > 0
     alive_count = 0
     for i in range(vertex_count):
@@ -381,6 +404,22 @@ def decimate(vertices: np.ndarray, faces: np.ndarray, *, target_vertices: int,
         log.info("decimation stopped at %d vertices (asked for %d): no collapse left below the "
                  "normal threshold %.0f deg", len(kept), target_vertices, normal_threshold)
     return Decimation(kept, out_faces, bool(stopped), target_vertices)
+
+
+def removal_costs(vertices: np.ndarray, faces: np.ndarray, *, target_vertices: int,
+                  roundness_weight: float = 0.5, normal_threshold: float = 60.0,
+                  locked=None) -> tuple[np.ndarray, np.ndarray]:
+    """The priority each vertex starts with: cost (V,) float (inf: no valid collapse) and the
+    neighbour it would collapse into (V,) int (-1: none). Same arguments as `decimate`."""
+    vertices = np.ascontiguousarray(vertices, dtype=np.float64)
+    faces = np.ascontiguousarray(faces, dtype=np.int64)
+    mask = np.zeros(len(vertices), dtype=np.bool_)
+    if locked is not None:
+        mask[np.asarray(locked)] = True
+    h = target_edge_length(vertices, faces, target_vertices)
+    return removal_cost_kernel(vertices, faces, mask, float(roundness_weight),
+                               math.cos(math.radians(normal_threshold)), 1.0 / h,
+                               (h * 1e-6) ** 2, _CAPACITY)
 
 
 # --- comparison with plain quadric decimation -----------------------------------------------

@@ -259,21 +259,26 @@ def resolve_regions(specs: Mapping[str, RegionSpec], vertices: np.ndarray, faces
 
 
 def auto_regions(vertices: np.ndarray, radius: float) -> dict[str, RegionSpec]:
-    """Regions chosen by position when none are given (+y up): the thumb under the mesh, the four
-    fingers spread across its top; opening pulls the thumb down and the fingers up by 15% of the
-    height."""
+    """Regions chosen by position when none are given (+y up): the thumb at the bottom of the
+    mesh, the four fingers at the top of four slabs spread across its width (x); opening pulls
+    the thumb down and the fingers up by 15% of the height. The radius shrinks if needed so the
+    regions stay disjoint."""
     lo, hi = vertices.min(0), vertices.max(0)
+    width = float(hi[0] - lo[0])
     height = float(hi[1] - lo[1])
-    centre = 0.5 * (lo + hi)
+    slab = 0.2 * width
+    radius = min(radius, 0.4 * slab)
     specs = {}
-    bottom = vertices[np.argmin(np.linalg.norm((vertices - [centre[0], lo[1], centre[2]])
-                                               * [1, 4, 1], axis=1))]
+    middle = np.abs(vertices[:, 0] - 0.5 * (lo[0] + hi[0])) < 0.5 * slab
+    bottom = vertices[np.flatnonzero(middle)[np.argmin(vertices[middle, 1])]]
     specs["thumb"] = RegionSpec("thumb", center=tuple(bottom), radius=radius,
                                 opening=Opening("translate", offset=(0.0, -0.15 * height, 0.0)))
     for k, name in enumerate(FINGERS[1:]):
-        x = lo[0] + (0.2 + 0.2 * k) * (hi[0] - lo[0])
-        top = vertices[np.argmin(np.linalg.norm((vertices - [x, hi[1], centre[2]]) * [1, 4, 1],
-                                                axis=1))]
+        x = lo[0] + (0.2 + 0.2 * k) * width
+        near = np.flatnonzero(np.abs(vertices[:, 0] - x) < 0.25 * slab)
+        if near.size == 0:
+            near = np.array([int(np.argmin(np.abs(vertices[:, 0] - x)))])
+        top = vertices[near[np.argmax(vertices[near, 1])]]
         specs[name] = RegionSpec(name, center=tuple(top), radius=radius,
                                  opening=Opening("translate", offset=(0.0, 0.15 * height, 0.0)))
     return specs

@@ -98,7 +98,8 @@ class BoneSpringReduction:
         nodes = np.concatenate([self.points, self.inner, self.outer])
         if nodes.size and (nodes.min() < 0 or nodes.max() >= model.node_count):
             raise ValueError(f"bone-spring nodes must be in [0, {model.node_count})")
-        if np.any(model.inverse_mass[self.inner] != 0) or np.any(model.inverse_mass[self.outer] != 0):
+        bones = np.concatenate([self.inner, self.outer])
+        if np.any(model.inverse_mass[bones] != 0):
             raise ValueError("bone points must be fixed nodes (kinematic) for BoneSpringReduction")
 
     def apply(self, x, v, h, inverse_mass, *, centers=None) -> float:

@@ -69,7 +69,8 @@ class JointCut:
         known = {"section", "names", "point", "normal", "axis", "pivot"}
         unknown = set(data) - known
         if unknown:
-            raise ValueError(f"{where} has unknown keys {sorted(unknown)}; expected {sorted(known)}")
+            raise ValueError(f"{where} has unknown keys {sorted(unknown)}; expected "
+                             f"{sorted(known)}")
         missing = {"section", "names", "point", "normal", "axis"} - set(data)
         if missing:
             raise ValueError(f"{where} is missing {sorted(missing)}")
@@ -78,7 +79,8 @@ class JointCut:
                 or not all(isinstance(n, str) and n for n in names)):
             raise ValueError(f"{where}: names must be two non-empty strings, got {names!r}")
         if not isinstance(data["section"], str) or not data["section"]:
-            raise ValueError(f"{where}: section must be a non-empty string, got {data['section']!r}")
+            raise ValueError(f"{where}: section must be a non-empty string, got "
+                             f"{data['section']!r}")
         pivot = data.get("pivot")
         return cls(
             section=data["section"], names=(names[0], names[1]),
@@ -202,7 +204,7 @@ def build_joint_tree(spec: JointSpec, skeleton: np.ndarray, *, edge_length: floa
     """Classify skeletal points by the cuts of `spec`.
 
     skeleton : (V, 3) float [mesh units]   skeletal points, one per surface vertex
-    edge_length : float [mesh units]       mean surface edge length (width of the default pivot band)
+    edge_length : float [mesh units]       mean surface edge length (sets the default pivot band)
     Raises ValueError for a cut of an unknown or already-cut section, duplicate names, a plane that
     misses the section, or a pivot far from its plane.
     """
@@ -255,8 +257,9 @@ def build_joint_tree(spec: JointSpec, skeleton: np.ndarray, *, edge_length: floa
             if np.any(pivot < low) or np.any(pivot > high):
                 raise ValueError(
                     f"{where}: pivot {pivot.round(4).tolist()} lies far outside section "
-                    f"{cut.section!r} (its skeleton spans {skeleton[members].min(0).round(4).tolist()}"
-                    f" to {skeleton[members].max(0).round(4).tolist()})")
+                    f"{cut.section!r} (its skeleton spans "
+                    f"{skeleton[members].min(0).round(4).tolist()} to "
+                    f"{skeleton[members].max(0).round(4).tolist()})")
         axis = _unit3(cut.axis, f"{where}: axis")
         first = len(names)
         for offset, name in enumerate(cut.names):

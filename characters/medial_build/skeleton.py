@@ -27,7 +27,7 @@ class Skeleton:
 
     points : (V, 3) float [mesh units]   one skeletal point per surface vertex
     depth : (V,) float [mesh units]      distance from each surface vertex to its skeletal point
-    fallback : (V,) bool                 vertex had no internal Voronoi point (skeletal point = vertex)
+    fallback : (V,) bool                 no internal Voronoi point: the skeletal point is the vertex
     clamped : (V,) bool                  depth was cut to half the inner chord along -normal
     internal_counts : (V,) int           internal Voronoi points found in each vertex's cell
     """

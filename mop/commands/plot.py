@@ -78,31 +78,18 @@ def store_names(store) -> list[str]:
 
 
 def follow(bank, values, actions):
-    """Step the bank over values (T, D): arrays of what it said at each step."""
+    """Step the bank over values (T, D) from a fresh start: what it said at each step."""
     import numpy as np
-    steps = len(values)
-    trace = {"progress": np.full(steps, np.nan), "variance": np.full(steps, np.nan),
-             "action": [None] * steps,
-             "posterior": {a: np.zeros(steps) for a in actions},
-             "log_likelihood": {a: np.full(steps, np.nan) for a in actions}}
-    bank.reset()
-    for k, x in enumerate(values):
-        out = bank.step(x)
-        trace["action"][k] = out.action
-        if out.action is not None:
-            trace["progress"][k] = out.progress
-            trace["variance"][k] = getattr(out, "variance", np.nan)
-        for action, p in (getattr(out, "posterior", None) or {}).items():
-            if action in trace["posterior"]:
-                trace["posterior"][action][k] = p
-        likelihoods = getattr(out, "log_likelihoods", None)
-        if likelihoods is None:
-            outputs = getattr(out, "outputs", None) or getattr(out, "followers", None) or {}
-            likelihoods = {a: getattr(o, "log_likelihood", np.nan) for a, o in outputs.items()}
-        for action, value in likelihoods.items():
-            if action in trace["log_likelihood"]:
-                trace["log_likelihood"][action][k] = value
-    return trace
+    result = bank.follow(values)
+    names = list(bank.actions)
+    shown = result["action"]
+    return {
+        "action": [names[k] if k >= 0 else None for k in shown],
+        "progress": np.where(shown >= 0, result["progress"], np.nan),
+        "variance": np.where(shown >= 0, result["variance"], np.nan),
+        "posterior": {a: result["posteriors"][:, names.index(a)] for a in actions},
+        "log_likelihood": {a: result["log_likelihoods"][:, names.index(a)] for a in actions},
+    }
 
 
 def run(args) -> int:

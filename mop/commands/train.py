@@ -19,15 +19,13 @@ def register(subparsers) -> None:
     parser.set_defaults(func=run)
 
 
-def confusion_matrix(templates) -> tuple[list[str], "object"]:
-    """(names, (A, A) float matrix) from followers.confusability, whatever container it uses."""
-    import numpy as np
-    from followers import confusability
-    result = confusability(dict(templates))
-    names = list(templates)
-    matrix = getattr(result, "matrix", result)
-    names = list(getattr(result, "names", names))
-    return names, np.asarray(matrix, dtype=float)
+def bank_options(performer) -> dict:
+    options = {}
+    if performer.sigma is not None:
+        options["sigma"] = performer.sigma
+    if performer.window is not None:
+        options["window"] = performer.window
+    return options
 
 
 def run(args) -> int:
@@ -52,20 +50,25 @@ def run(args) -> int:
         for name, template in templates.items():
             drives = [f"{a.character}" for a in config.actions_of(performer.name)
                       if a.take == name]
-            print(f"  {name:<16} {template.shape[0]:>4} frames ({template.shape[0] / config.fps:.2f}"
-                  f" s at {config.fps} fps) -> {', '.join(drives)}")
-        names, matrix = confusion_matrix(templates)
-        results.append((performer.name, names, matrix))
+            seconds = (template.shape[0] - 1) / config.fps
+            print(f"  {name:<16} {template.shape[0]:>4} frames ({seconds:.2f} s at {config.fps} "
+                  f"fps) -> {', '.join(drives)}")
+        from followers import confusability
+        result = confusability(templates, **bank_options(performer))
+        names, matrix = list(result.names), result.matrix
+        results.append((performer.name, result))
         width = max(len(n) for n in names) + 2
-        print("  confusability (row: demonstration, column: follower):")
-        print("  " + " " * width + "".join(f"{n[:10]:>11}" for n in names))
+        print("  confusability (row: demonstration performed, column: follower accepting it):")
+        print("  " + " " * width + "".join(f"{n:>{width}}" for n in names))
         for name, row in zip(names, matrix):
-            print(f"  {name:<{width}}" + "".join(f"{v:>11.3f}" for v in row))
-        off = matrix.copy()
-        np.fill_diagonal(off, -np.inf)
-        if off.size > 1 and np.isfinite(off).any():
-            i, j = np.unravel_index(np.argmax(off), off.shape)
-            print(f"  most confusable: {names[i]} looks like {names[j]} ({matrix[i, j]:.3f})")
+            print(f"  {name:<{width}}" + "".join(f"{v:>{width}.3f}" for v in row))
+        if len(names) > 1:
+            shown, taken_for, value = result.most_confusable()
+            print(f"  most confusable: {shown} is accepted by {taken_for}'s follower on "
+                  f"{value:.0%} of its frames")
+        recognised = np.diag(result.decisions[:, :len(names)])
+        print("  recognised as itself by the bank: " + ", ".join(
+            f"{n} {v:.0%}" for n, v in zip(names, recognised)))
     target = Path(args.plot) if args.plot else Path(f"{Path(args.session).stem}-confusability.png")
     plot_matrices(results, target)
     print(f"wrote {target}")
@@ -73,24 +76,18 @@ def run(args) -> int:
 
 
 def plot_matrices(results, path: Path) -> None:
+    """One confusability matrix per performer, side by side, into a PNG."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    figure, axes = plt.subplots(1, len(results), figsize=(4.2 * len(results), 3.8),
+    widest = max(len(result.names) for _, result in results)
+    size = 1.6 + 0.75 * widest
+    figure, axes = plt.subplots(1, len(results), figsize=((size + 1.6) * len(results), size + 0.4),
                                 squeeze=False)
-    for axis, (performer, names, matrix) in zip(axes[0], results):
-        image = axis.imshow(matrix, cmap="magma", vmin=0.0, vmax=max(1.0, float(matrix.max())))
-        axis.set_xticks(range(len(names)), names, rotation=30, ha="right")
-        axis.set_yticks(range(len(names)), names)
-        axis.set_xlabel("follower")
-        axis.set_ylabel("demonstration")
-        axis.set_title(f"performer {performer}")
-        for (i, j), value in __import__("numpy").ndenumerate(matrix):
-            axis.text(j, i, f"{value:.2f}", ha="center", va="center",
-                      color="white" if value < 0.6 * max(1.0, matrix.max()) else "black")
-        figure.colorbar(image, ax=axis, fraction=0.046)
-    figure.suptitle("How confusable the actions are")
+    for axis, (performer, result) in zip(axes[0], results):
+        result.plot(axis, title=f"performer {performer}")
+    figure.suptitle("How confusable the actions are (acceptance per follower)")
     figure.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
-    figure.savefig(path, dpi=110)
+    figure.savefig(path, dpi=100)
     plt.close(figure)

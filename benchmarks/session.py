@@ -1,0 +1,178 @@
+"""Session loop cost for 1x1, 2x3 and 4x8 performers x characters (replay mode, one core).
+
+    python3 benchmarks/session.py [--frames 150] [--mix image,demo] [--render]
+
+For each size it builds a session on the shipped demo takes (each performer replays the glove or
+the hand show; each character is bound to one performer's action) and prints, per frame:
+median (and p90) milliseconds of each stage — capture, follow, simulate, render (with --render)
+— the frame excluding rendering, and the input-to-pose latency (from reading the newest input
+to the puppets holding the pose it asked for). Two character mixes:
+
+- image: every character is the shipped cut-out (momo, 401 vertices) — the lightest real puppet;
+- demo: the demo's kinds in turn (momo, the medial caterpillar, the latex frog at 1000 masses).
+
+Plain reference, same process: the same banks and puppets stepped in a bare loop (no feeds, no
+blending, no bookkeeping); "overhead" is the session frame minus that reference, i.e. what the
+session itself adds. Targets (issue 6): 4x8 frame without rendering <= 10 ms on one core;
+input-to-pose latency well under MOP's 11.4 ms.
+"""
+from __future__ import annotations
+
+import os
+
+for _name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS"):
+    os.environ.setdefault(_name, "1")
+os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
+
+import argparse  # noqa: E402
+import sys  # noqa: E402
+import time  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+# benchmarks/capture.py would shadow the capture package: drop this folder from the path
+_HERE = Path(__file__).resolve().parent
+sys.path[:] = [p for p in sys.path if Path(p or ".").resolve() != _HERE]
+
+import numpy as np  # noqa: E402
+
+ROOT = Path(__file__).resolve().parent.parent
+TAKES = ROOT / "recordings" / "demo"
+SIZES = ((1, 1), (2, 3), (4, 8))
+
+# what a character of each kind plays, per performer kind: (take, {motion channel: target})
+BINDINGS = {
+    ("image", "glove"): ("glove_ripple", {}),
+    ("image", "hand"): ("hand_lift", {}),
+    ("medial", "glove"): ("glove_chomp", {"thumb": "jaw", "index": "head", "middle": "front"}),
+    ("medial", "hand"): ("hand_circle", {}),
+    ("latex", "glove"): ("glove_chomp", {}),
+    ("latex", "hand"): ("hand_circle", {"front": "thumb", "tail": "index"}),
+}
+ASSETS = {"image": "momo", "medial": "medial_caterpillar", "latex": "froggy"}
+
+
+def session_table(performers: int, characters: int, mix: str) -> dict:
+    kinds = ["image"] if mix == "image" else ["image", "medial", "latex"]
+    table = {"session": {"fps": 25, "blend": 0.3, "size": [640, 360], "takes": str(TAKES)},
+             "performers": {}, "characters": {}, "actions": []}
+    performer_kinds = []
+    for p in range(performers):
+        kind = "glove" if p % 2 == 0 else "hand"
+        performer_kinds.append(kind)
+        table["performers"][f"p{p}"] = {"source": f"replay:{kind}_show"}
+    for c in range(characters):
+        kind = kinds[c % len(kinds)]
+        p = c % performers
+        character = {"kind": kind, "asset": ASSETS[kind],
+                     "position": [(c % 4 + 0.5) / 4, (c // 4 + 0.5) / 2], "scale": 0.45}
+        if kind == "latex":
+            character["options"] = {"masses": 1000}
+        table["characters"][f"c{c}"] = character
+        take, channels = BINDINGS[(kind, performer_kinds[p])]
+        action = {"take": take, "performer": f"p{p}", "character": f"c{c}"}
+        if channels:
+            action["channels"] = channels
+        table["actions"].append(action)
+    return table
+
+
+def bare_reference(session, frames: int) -> float:
+    """Median ms per frame of the same banks and puppets stepped without the session."""
+    inputs = []
+    for performer in session.performers:
+        feed = performer.feed
+        rows = [np.array(feed.poll(k / session.fps)) for k in range(frames)]
+        inputs.append([performer.prepare(row) for row in rows])
+    targets = []
+    for character in session.characters:
+        sample = {}
+        for track in character.tracks:
+            motion, channels = next(iter(track.motions.values()))
+            values = motion.sample(0.5 * motion.duration)
+            for channel, target in channels:
+                value = values[channel]
+                sample[target] = float(value[0]) if len(value) == 1 else value
+        targets.append(sample)
+    for performer in session.performers:
+        performer.bank.reset()
+    for character in session.characters:
+        character.puppet.reset()
+    times = []
+    for k in range(frames):
+        start = time.perf_counter()
+        for performer, rows in zip(session.performers, inputs):
+            performer.bank.step(rows[k])
+        for character, sample in zip(session.characters, targets):
+            character.puppet.step(session.dt, sample)
+        times.append(time.perf_counter() - start)
+    return 1e3 * float(np.median(times))
+
+
+def measure(performers: int, characters: int, mix: str, frames: int, render: bool) -> dict:
+    from mop.session import Mode, parse_session
+    from mop.session.build import Overrides, build_session
+    config = parse_session(session_table(performers, characters, mix), where="benchmark")
+    session = build_session(config, mode=Mode.REPLAY, overrides=Overrides(render=render))
+    session.run(duration=(frames + 0.5) / config.fps)
+    stages = session.report().stages
+    reference = bare_reference(session, frames)
+    excluding = np.array([0.0])
+    counts = min(stages["capture"]["count"], session.clock.capacity)
+    parts = [session.clock.values(name)[:counts] for name in ("capture", "follow", "simulate")]
+    excluding = parts[0] + parts[1] + parts[2]
+    return {"stages": stages, "frame": float(np.median(excluding)),
+            "frame_p90": float(np.percentile(excluding, 90)), "reference": reference}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--frames", type=int, default=150)
+    parser.add_argument("--mix", default="image,demo", help="image, demo or both")
+    parser.add_argument("--render", action="store_true",
+                        help="also render (pyrender for 3D kinds: slow without a GPU)")
+    parser.add_argument("--cores", type=int, default=1, help="CPU cores to run on (default 1)")
+    args = parser.parse_args()
+    if hasattr(os, "sched_setaffinity") and args.cores:
+        os.sched_setaffinity(0, set(sorted(os.sched_getaffinity(0))[:args.cores]))
+    print(f"session benchmark: {args.frames} frames at 25 fps, replay mode, "
+          f"{len(os.sched_getaffinity(0)) if hasattr(os, 'sched_getaffinity') else '?'} core(s)"
+          f"{', rendering 640x360' if args.render else ', no rendering'}")
+    header = (f"{'mix':<6}{'P x C':>6}{'capture':>9}{'follow':>8}{'simulate':>10}"
+              f"{'frame':>8}{'p90':>7}{'bare':>7}{'overhead':>9}{'in->pose':>10}{'p90':>7}"
+              + (f"{'render':>8}{'in->out':>9}" if args.render else ""))
+    for mix in args.mix.split(","):
+        print()
+        print(header)
+        rows = []
+        for performers, characters in SIZES:
+            result = measure(performers, characters, mix, args.frames, args.render)
+            stages = result["stages"]
+            rows.append((performers, characters, result))
+            line = (f"{mix:<6}{performers:>3}x{characters:<2}"
+                    f"{stages['capture']['median']:>9.3f}{stages['follow']['median']:>8.3f}"
+                    f"{stages['simulate']['median']:>10.3f}{result['frame']:>8.3f}"
+                    f"{result['frame_p90']:>7.2f}{result['reference']:>7.2f}"
+                    f"{result['frame'] - result['reference']:>9.3f}"
+                    f"{stages['input_to_pose']['median']:>10.3f}"
+                    f"{stages['input_to_pose']['p90']:>7.2f}")
+            if args.render:
+                line += (f"{stages['render']['median']:>8.2f}"
+                         f"{stages['input_to_output']['median']:>9.2f}")
+            print(line, flush=True)
+        base = rows[0][2]
+        for performers, characters, result in rows[1:]:
+            stages, first = result["stages"], base["stages"]
+            print(f"  {performers}x{characters} vs 1x1: follow x"
+                  f"{stages['follow']['median'] / max(first['follow']['median'], 1e-9):.1f} "
+                  f"(performers x{performers}), simulate x"
+                  f"{stages['simulate']['median'] / max(first['simulate']['median'], 1e-9):.1f}"
+                  f" (characters x{characters}), frame x"
+                  f"{result['frame'] / max(base['frame'], 1e-9):.1f}; per character "
+                  f"{stages['simulate']['median'] / characters:.2f} ms, per performer "
+                  f"{stages['follow']['median'] / performers:.3f} ms")
+    print("\ntargets: 4x8 frame (capture + follow + simulate) <= 10 ms on one core; "
+          "input-to-pose well under MOP's 11.4 ms")
+
+
+if __name__ == "__main__":
+    main()

@@ -103,6 +103,7 @@ class OscSource(ThreadedSource):
         self.receive_buffer = int(receive_buffer)
         super().__init__(names, 0.0, clock=clock, spec=spec or f"osc:{host}:{port}", **options)
         self._state = np.full(len(names), np.nan)
+        self._scratch = np.empty(max(len(names), 1))
         self._socket: socket.socket | None = None
         self._kernel_drops = 0
         self._parser = _osc_parser()
@@ -190,7 +191,8 @@ class OscSource(ThreadedSource):
                 self._problem(f"{address}: {len(params)} arguments, expected {width}",
                               malformed=True)
                 continue
-            values = np.empty(width)
+            # checked into a reused scratch row first, so a bad argument changes nothing
+            values = self._scratch[:width]
             bad = False
             for i, value in enumerate(params):
                 if isinstance(value, (bool, int, float)):
@@ -215,5 +217,6 @@ class OscSource(ThreadedSource):
         self._slices[address] = slice(0, count)
         self._channels = tuple(names)
         self._state = np.full(count, np.nan)
+        self._scratch = np.empty(count)
         self._learn = None
         log.info("OSC %s: %d channels learnt from the first message", address, count)

@@ -34,6 +34,7 @@ import os
 import sqlite3
 import threading
 import time
+from collections import deque
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Iterable, Mapping, Sequence
@@ -136,10 +137,15 @@ class StoreWriter:
     path : the new file (`.sqlite`); an existing file is an error unless overwrite=True.
     metadata : JSON dict stored with the file (replace later with `set_metadata`).
     commit_interval : [s] between background commits (<= 0.1; default 0.05).
+    max_pending : frames allowed to wait for a commit. When more wait, or the oldest waited
+        1.5 commit intervals, the append commits in the appending thread (backpressure: a
+        producer faster than the disk is slowed to the disk's pace instead of piling up frames
+        a crash would lose).
     """
 
     def __init__(self, path: str | os.PathLike, *, metadata: Mapping | None = None,
-                 commit_interval: float = 0.05, overwrite: bool = False):
+                 commit_interval: float = 0.05, overwrite: bool = False,
+                 max_pending: int = 5000):
         if not 0 < commit_interval <= 0.1:
             raise ValueError(f"commit_interval must be in (0, 0.1] s so that a crash loses at "
                              f"most 100 ms, got {commit_interval!r}")
@@ -151,12 +157,18 @@ class StoreWriter:
             remove_store_file(self.path)
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self.commit_interval = float(commit_interval)
+        if max_pending < 1:
+            raise ValueError(f"max_pending must be >= 1, got {max_pending}")
+        self.max_pending = int(max_pending)
         self.stats = WriterStats()
         self._db = sqlite3.connect(str(self.path), check_same_thread=False, isolation_level=None)
         self._db_lock = threading.Lock()
-        self._pending: list[tuple] = []
+        # appends go to a deque without the commit thread's lock: a lock shared by a tight
+        # append loop and the committer starves the committer (Python locks are not fair)
+        self._pending: deque[tuple] = deque()
         self._pending_since: float | None = None
-        self._pending_lock = threading.Lock()
+        self._append_lock = threading.Lock()     # between appending threads only
+        self._flush_lock = threading.Lock()      # between committing threads only
         self._streams: dict[str, tuple[int, int]] = {}      # name -> (id, D)
         self._next_seq: dict[int, int] = {}
         self._last_commit = time.monotonic()
@@ -233,12 +245,13 @@ class StoreWriter:
         t = float(t)
         if not math.isfinite(t):
             raise ValueError(f"frame time must be finite, got {t!r}")
-        with self._pending_lock:
+        with self._append_lock:
             seq = self._next_seq[stream_id]
             self._next_seq[stream_id] = seq + 1
-            self._pending.append((stream_id, seq, t, row.tobytes()))
             if self._pending_since is None:
                 self._pending_since = time.monotonic()
+            self._pending.append((stream_id, seq, t, row.tobytes()))
+        self._backpressure()
 
     def append_many(self, stream: str, times, values) -> None:
         """Queue N frames: times (N,) [s], values (N, D)."""
@@ -250,13 +263,22 @@ class StoreWriter:
                              f"got {times.shape} and {block.shape}")
         if not np.all(np.isfinite(times)):
             raise ValueError("frame times must be finite")
-        with self._pending_lock:
+        with self._append_lock:
             first = self._next_seq[stream_id]
             self._next_seq[stream_id] = first + times.shape[0]
-            self._pending.extend((stream_id, first + i, float(t), block[i].tobytes())
-                                 for i, t in enumerate(times))
             if self._pending_since is None:
                 self._pending_since = time.monotonic()
+            self._pending.extend((stream_id, first + i, float(t), block[i].tobytes())
+                                 for i, t in enumerate(times))
+        self._backpressure()
+
+    def _backpressure(self) -> None:
+        # the background commit is late (a producer outpacing the disk, or a busy machine):
+        # commit here, so that frames never wait much longer than the commit interval
+        since = self._pending_since
+        if len(self._pending) > self.max_pending or (
+                since is not None and time.monotonic() - since > 1.5 * self.commit_interval):
+            self.flush()
 
     def frame_count(self, stream: str) -> int:
         """Frames appended to `stream` so far (committed or not)."""
@@ -265,11 +287,18 @@ class StoreWriter:
 
     def flush(self) -> None:
         """Commit every queued frame now."""
-        with self._pending_lock:
-            rows, self._pending = self._pending, []
-            since, self._pending_since = self._pending_since, None
+        with self._flush_lock:
+            self._flush()
+
+    def _flush(self) -> None:
+        since, self._pending_since = self._pending_since, None
+        pending = self._pending
+        # popleft is atomic; frames appended meanwhile stay for the next commit
+        rows = [pending.popleft() for _ in range(len(pending))]
         if not rows:
             return
+        if since is None:
+            since = time.monotonic()
         started = time.monotonic()
         with self._db_lock:
             self._db.execute("BEGIN")

@@ -314,3 +314,23 @@ def test_region_specs_reject_unknown_fingers_and_bad_openings(tmp_path):
     bad.write_text("{not json")
     with pytest.raises(ValueError, match="not valid JSON"):
         parse_regions(bad)
+
+
+@pytest.mark.realdata
+def test_barycentric_connection_lands_on_the_nearest_decimated_triangle(duck):
+    result = dec.decimate(duck.vertices, duck.faces, target_vertices=300)
+    conn = build_connection(duck.vertices, duck.faces, result.kept, weighting="barycentric",
+                            surface_faces=result.faces)
+    w = conn.matrix()
+    np.testing.assert_allclose(np.asarray(w.sum(1)).ravel(), 1.0, rtol=1e-12)
+    assert conn.weights.min() > 0 and np.diff(conn.indptr).max() <= 3
+    nodes = duck.vertices[result.kept]
+    landing = w @ nodes  # each vertex's point on the decimated surface
+    gap = np.linalg.norm(landing - duck.vertices, axis=1)
+    nearest = SurfaceDistance(nodes, result.faces)(duck.vertices)
+    assert np.all(gap >= nearest - 1e-12)
+    assert np.mean(np.isclose(gap, nearest, rtol=1e-9, atol=1e-12)) > 0.98
+    # an affine motion of the nodes moves every vertex by the motion of its landing point
+    a = np.array([[1.1, 0.2, 0.0], [0.0, 0.9, 0.1], [0.05, 0.0, 1.0]])
+    moved = w @ (nodes @ a.T + [0.1, 0.2, 0.3])
+    np.testing.assert_allclose(moved, landing @ a.T + [0.1, 0.2, 0.3], atol=1e-12)

@@ -225,17 +225,21 @@ class ColorBlobTracker(Tracker):
             for low, high in ranges[1:]:
                 cv2.inRange(self._hsv, low, high, dst=self._part)
                 cv2.bitwise_or(self._mask, self._part, dst=self._mask)
-            count, _, stats, centroids = cv2.connectedComponentsWithStats(self._mask,
-                                                                          connectivity=8)
-            if count < 2:
+            # the largest outer contour picks the blob (much cheaper than labelling every
+            # component); its pixels' moments inside its bounding box give centroid and area
+            contours, _ = cv2.findContours(self._mask, cv2.RETR_EXTERNAL,
+                                           cv2.CHAIN_APPROX_SIMPLE)
+            if not contours:
                 continue
-            best = 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
-            area = stats[best, cv2.CC_STAT_AREA] / pixels
-            if area < self.min_area or stats[best, cv2.CC_STAT_AREA] == 0:
+            blob = max(contours, key=cv2.contourArea)
+            x, y, w, h = cv2.boundingRect(blob)
+            moments = cv2.moments(self._mask[y:y + h, x:x + w], binaryImage=True)
+            count = moments["m00"]
+            if count == 0 or count / pixels < self.min_area:
                 continue
-            out[3 * k] = centroids[best, 0] / width
-            out[3 * k + 1] = centroids[best, 1] / height
-            out[3 * k + 2] = area
+            out[3 * k] = (x + moments["m10"] / count) / width
+            out[3 * k + 1] = (y + moments["m01"] / count) / height
+            out[3 * k + 2] = count / pixels
         return out
 
 
@@ -249,11 +253,13 @@ class FaceTracker(Tracker):
     0). NaN when not found (Haar eye detection often misses one eye behind glasses).
 
     detect_width : [px] faces are searched on a copy scaled to this width (speed).
+    feature_width : [px] eyes and smile are searched on the face box scaled to this width.
     """
     name = "face"
 
     def __init__(self, *, detect_width: int = 320, min_face: float = 0.12,
-                 face_neighbors: int = 5, eye_neighbors: int = 4, smile_neighbors: int = 20):
+                 face_neighbors: int = 5, eye_neighbors: int = 4, smile_neighbors: int = 20,
+                 feature_width: int = 120):
         cv2 = _cv2()
         root = cv2.data.haarcascades
 
@@ -276,6 +282,10 @@ class FaceTracker(Tracker):
         self.face_neighbors = int(face_neighbors)
         self.eye_neighbors = int(eye_neighbors)
         self.smile_neighbors = int(smile_neighbors)
+        if feature_width < 60:
+            raise ValueError(f"feature_width must be >= 60 px, got {feature_width}")
+        self.feature_width = int(feature_width)
+        self._face_image: np.ndarray | None = None
         self.channels = ("face.x", "face.y", "face.w", "face.h", "eye_left.x", "eye_left.y",
                          "eye_right.x", "eye_right.y", "smile")
         self._gray = self._small = None
@@ -283,7 +293,8 @@ class FaceTracker(Tracker):
     def describe(self) -> dict:
         return {"tracker": self.name, "detect_width": self.detect_width,
                 "min_face": self.min_face, "face_neighbors": self.face_neighbors,
-                "eye_neighbors": self.eye_neighbors, "smile_neighbors": self.smile_neighbors}
+                "eye_neighbors": self.eye_neighbors, "smile_neighbors": self.smile_neighbors,
+                "feature_width": self.feature_width}
 
     def process(self, image: np.ndarray) -> np.ndarray:
         cv2 = _cv2()
@@ -307,13 +318,19 @@ class FaceTracker(Tracker):
         out[0:4] = ((x + w / 2) / width, (y + h / 2) / height, w / width, h / height)
         x0, y0 = max(0, int(round(x))), max(0, int(round(y)))
         x1, y1 = min(width, int(round(x + w))), min(height, int(round(y + h)))
-        face = self._gray[y0:y1, x0:x1]
-        fh, fw = face.shape
-        if fh < 20 or fw < 20:
+        if x1 - x0 < 20 or y1 - y0 < 20:
             return out
+        # eyes and smile are searched on the face scaled to a fixed size: the cascades then
+        # scan a handful of scales whatever the face's size in the image
+        fw = self.feature_width
+        fh = max(20, round(fw * (y1 - y0) / (x1 - x0)))
+        if self._face_image is None or self._face_image.shape != (fh, fw):
+            self._face_image = np.empty((fh, fw), np.uint8)
+        face = self._face_image
+        cv2.resize(self._gray[y0:y1, x0:x1], (fw, fh), dst=face, interpolation=cv2.INTER_AREA)
         upper = face[: fh * 11 // 20]
         half = fw // 2
-        size = dict(minSize=(max(8, fw // 10),) * 2, maxSize=(half, half))
+        size = dict(minSize=(fw // 10,) * 2, maxSize=(half, half))
         for slot, cascade, part, left in ((4, self._eye_image_left, upper[:, :half], 0),
                                           (6, self._eye_image_right, upper[:, half:], half)):
             eyes = cascade.detectMultiScale(part, scaleFactor=1.1,
@@ -324,7 +341,7 @@ class FaceTracker(Tracker):
         lower = face[fh // 2:]
         smiles = self._smile.detectMultiScale(lower, scaleFactor=1.2,
                                               minNeighbors=self.smile_neighbors,
-                                              minSize=(max(10, fw // 4), max(5, fh // 10)))
+                                              minSize=(fw // 4, max(5, fh // 10)))
         out[8] = 1.0 if len(smiles) else 0.0
         return out
 

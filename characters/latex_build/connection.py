@@ -14,6 +14,12 @@ one,
 Equation 3 as printed divides each distance by the sum of distances, which would give the
 farther connector the larger weight; the weight used here is its inverse-distance reading.
 The weights are a sparse (V, n) matrix built once; applying it is one CSR product per frame.
+
+Distance weights interpolate like Shepard's method: around each decimated vertex the visual
+surface keeps a small dimple when the coarse mesh rotates (the rendered frog looked pebbly with
+its jaw open). `weighting="barycentric"` keeps equation 4 and the edge-distance neighbourhood
+but weighs the three corners of the nearest decimated triangle by the barycentric coordinates
+of the vertex's closest point on it, which follows rotations smoothly.
 """
 from __future__ import annotations
 
@@ -103,6 +109,77 @@ def apply_connection(indptr, indices, weights, rest_visual, node_rest, node_x, o
         out[i, 2] = rest_visual[i, 2] + tz
 
 
+@njit(**_JIT)
+def _closest_barycentric(p, a, b, c):
+    """Barycentric weights (wa, wb, wc) >= 0 of the point of triangle abc closest to p, and the
+    squared distance (Ericson, Real-Time Collision Detection 5.1.5)."""
+    ab = b - a
+    ac = c - a
+    ap = p - a
+    d1 = ab @ ap
+    d2 = ac @ ap
+    if d1 <= 0.0 and d2 <= 0.0:
+        wa, wb, wc = 1.0, 0.0, 0.0
+    else:
+        bp = p - b
+        d3 = ab @ bp
+        d4 = ac @ bp
+        vc = d1 * d4 - d3 * d2
+        cp = p - c
+        d5 = ab @ cp
+        d6 = ac @ cp
+        vb = d5 * d2 - d1 * d6
+        va = d3 * d6 - d5 * d4
+        if d3 >= 0.0 and d4 <= d3:
+            wa, wb, wc = 0.0, 1.0, 0.0
+        elif vc <= 0.0 and d1 >= 0.0 and d3 <= 0.0:
+            t = d1 / (d1 - d3)
+            wa, wb, wc = 1.0 - t, t, 0.0
+        elif d6 >= 0.0 and d5 <= d6:
+            wa, wb, wc = 0.0, 0.0, 1.0
+        elif vb <= 0.0 and d2 >= 0.0 and d6 <= 0.0:
+            t = d2 / (d2 - d6)
+            wa, wb, wc = 1.0 - t, 0.0, t
+        elif va <= 0.0 and (d4 - d3) >= 0.0 and (d5 - d6) >= 0.0:
+            t = (d4 - d3) / ((d4 - d3) + (d5 - d6))
+            wa, wb, wc = 0.0, 1.0 - t, t
+        else:
+            denom = 1.0 / (va + vb + vc)
+            wb = vb * denom
+            wc = vc * denom
+            wa = 1.0 - wb - wc
+    q = wa * a + wb * b + wc * c
+    e = p - q
+    return wa, wb, wc, e @ e
+
+
+@njit(**_JIT)
+def barycentric_weights(points, node_points, node_faces, face_starts, face_items, found,
+                        out_nodes, out_weights):
+    """For each point, the decimated triangle around its candidate nodes (found (P, k), -1 =
+    none) that comes closest to it, and the barycentric weights of that closest point.
+    Writes out_nodes (P, 3) (-1 where no candidate triangle exists) and out_weights (P, 3)."""
+    for i in range(points.shape[0]):
+        best = np.inf
+        out_nodes[i, 0] = -1
+        for a in range(found.shape[1]):
+            j = found[i, a]
+            if j < 0:
+                continue
+            for e in range(face_starts[j], face_starts[j + 1]):
+                f = face_items[e]
+                wa, wb, wc, d2 = _closest_barycentric(points[i], node_points[node_faces[f, 0]],
+                                                      node_points[node_faces[f, 1]],
+                                                      node_points[node_faces[f, 2]])
+                if d2 < best:
+                    best = d2
+                    for c in range(3):
+                        out_nodes[i, c] = node_faces[f, c]
+                    out_weights[i, 0] = wa
+                    out_weights[i, 1] = wb
+                    out_weights[i, 2] = wc
+
+
 @dataclass
 class ConnectionMap:
     """Sparse weights (V, n) in CSR arrays: indptr (V+1,), indices (nnz,) node index,
@@ -120,31 +197,71 @@ class ConnectionMap:
                           shape=(len(self.indptr) - 1, self.node_count))
 
 
+WEIGHTINGS = ("distance", "barycentric")
+
+
 def build_connection(vertices: np.ndarray, faces: np.ndarray, kept: np.ndarray, *,
-                     connectors: int = 3) -> ConnectionMap:
-    """Connect each visual vertex (V, 3) to its `connectors` nearest decimated vertices.
+                     connectors: int = 3, weighting: str = "distance",
+                     surface_faces: np.ndarray | None = None) -> ConnectionMap:
+    """Connect each visual vertex (V, 3) to its nearest decimated vertices by edge distance.
 
     kept (n,) int: the visual vertex index of each decimated vertex (decimation keeps a subset).
-    Raises ValueError if some visual vertex reaches no decimated vertex along the edges (a
-    mesh component that decimation emptied)."""
+    weighting "distance" (equation 3): the `connectors` nearest, inverse edge distance weights.
+    weighting "barycentric": among the decimated triangles (surface_faces (F_s, 3), over the
+    decimated vertices) around a vertex's 2 * connectors + 2 nearest, the one closest to it,
+    with the barycentric weights of the closest point: an affine deformation of the decimated
+    surface then moves the visual mesh exactly affinely (no dimples around the nodes); where
+    no such triangle exists the distance weights are used.
+    Raises ValueError if some visual vertex reaches no decimated vertex along the edges."""
     if connectors < 1:
         raise ValueError(f"connectors must be >= 1, got {connectors}")
+    if weighting not in WEIGHTINGS:
+        raise ValueError(f"weighting must be one of {WEIGHTINGS}, got {weighting!r}")
+    if weighting == "barycentric" and surface_faces is None:
+        raise ValueError("barycentric weighting needs the decimated surface_faces")
     starts, neighbours, lengths = edge_graph(vertices, faces)
     kept = np.ascontiguousarray(kept, dtype=np.int64)
-    found, distance = nearest_sources(starts, neighbours, lengths, kept, int(connectors))
+    reach = connectors if weighting == "distance" else 2 * connectors + 2
+    found, distance = nearest_sources(starts, neighbours, lengths, kept, int(reach))
     unreached = found[:, 0] < 0
     if unreached.any():
         raise ValueError(f"{int(unreached.sum())} visual vertices reach no decimated vertex "
                          f"along the mesh edges (a separate mesh part lost all its vertices); "
                          f"ask for more masses")
-    valid = found >= 0
+    near = found[:, :connectors]
+    valid = near >= 0
     with np.errstate(divide="ignore"):
-        inverse = np.where(valid, 1.0 / distance, 0.0)
+        inverse = np.where(valid, 1.0 / distance[:, :connectors], 0.0)
     exact = distance[:, 0] == 0.0
     inverse[exact] = 0.0
     inverse[exact, 0] = 1.0
+    nodes = np.where(valid, near, -1)
     weights = inverse / inverse.sum(1, keepdims=True)
-    keep = valid & (weights > 0)  # zero-weight slots stay out of the matrix
+    if weighting == "barycentric":
+        node_faces = np.ascontiguousarray(surface_faces, dtype=np.int64)
+        order = np.argsort(node_faces.ravel(), kind="stable")
+        face_items = (order // 3).astype(np.int64)
+        face_starts = np.zeros(len(kept) + 1, dtype=np.int64)
+        np.add.at(face_starts, node_faces.ravel() + 1, 1)
+        np.cumsum(face_starts, out=face_starts)
+        tri_nodes = np.full((len(vertices), 3), -1, dtype=np.int64)
+        tri_weights = np.zeros((len(vertices), 3))
+        barycentric_weights(np.ascontiguousarray(vertices, dtype=np.float64),
+                            np.ascontiguousarray(vertices[kept], dtype=np.float64), node_faces,
+                            face_starts, face_items, np.ascontiguousarray(found), tri_nodes,
+                            tri_weights)
+        use = (tri_nodes[:, 0] >= 0) & ~exact
+        pad = max(connectors, 3)
+        merged_nodes = np.full((len(vertices), pad), -1, dtype=np.int64)
+        merged_weights = np.zeros((len(vertices), pad))
+        merged_nodes[:, :connectors] = nodes
+        merged_weights[:, :connectors] = weights
+        merged_nodes[use] = -1
+        merged_weights[use] = 0.0
+        merged_nodes[use, :3] = tri_nodes[use]
+        merged_weights[use, :3] = tri_weights[use]
+        nodes, weights = merged_nodes, merged_weights
+    keep = (nodes >= 0) & (weights > 0)  # zero-weight slots stay out of the matrix
     indptr = np.zeros(len(vertices) + 1, dtype=np.int64)
     np.cumsum(keep.sum(1), out=indptr[1:])
-    return ConnectionMap(indptr, found[keep].astype(np.int64), weights[keep], len(kept))
+    return ConnectionMap(indptr, nodes[keep].astype(np.int64), weights[keep], len(kept))

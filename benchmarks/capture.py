@@ -216,7 +216,7 @@ def tracker_frames():
     image = np.full((480, 640, 3), 110, np.uint8)
     marker = cv2.aruco.generateImageMarker(
         cv2.aruco.getPredefinedDictionary(cv2.aruco.DICT_4X4_50), 0, 120)
-    image[180:320, 250:390] = 255
+    image[160:340, 230:410] = 255          # a quiet zone of 2 marker cells
     image[190:310, 260:380] = marker[..., None]
     frames["aruco"] = image
     image = np.full((480, 640, 3), 40, np.uint8)
@@ -347,9 +347,58 @@ def bench_store(duration: float, folder: Path) -> None:
           f"{1e3 * s.worst_unsaved_age:.1f} ms, commit time {stats_ms(s.commit_seconds)}")
 
 
+def draw_trackers(path: Path) -> None:
+    """What each tracker sees and finds on the benchmark frames, as one PNG (2 x 2 panels)."""
+    import cv2
+    from capture.camera.trackers import default_camera_matrix, make_tracker
+    panels = []
+    for name, image in tracker_frames().items():
+        tracker = make_tracker(name, **({"ids": [0]} if name == "aruco" else {}))
+        values = dict(zip(tracker.channels, tracker.process(image)))
+        canvas = image.copy()
+        if name == "aruco":
+            camera = default_camera_matrix(640, 480)
+            t = np.array([values[f"aruco0.{a}"] for a in "xyz"])
+            r = np.array([values[f"aruco0.r{a}"] for a in "xyz"])
+            cv2.drawFrameAxes(canvas, camera, np.zeros(5), r, t, 0.04, 3)
+            label = f"aruco0 at ({t[0]:+.3f}, {t[1]:+.3f}, {t[2]:.3f}) m"
+        elif name == "color":
+            for colour in ("red", "green", "blue"):
+                x, y = values[f"{colour}.x"] * 640, values[f"{colour}.y"] * 480
+                cv2.drawMarker(canvas, (int(x), int(y)), (255, 255, 255), cv2.MARKER_CROSS, 30, 2)
+            label = "largest blob per colour"
+        elif name == "face":
+            cx, cy = values["face.x"] * 640, values["face.y"] * 480
+            w, h = values["face.w"] * 640, values["face.h"] * 480
+            cv2.rectangle(canvas, (int(cx - w / 2), int(cy - h / 2)),
+                          (int(cx + w / 2), int(cy + h / 2)), (0, 255, 0), 2)
+            for eye in ("eye_left", "eye_right"):
+                if not math.isnan(values[f"{eye}.x"]):
+                    ex = cx - w / 2 + values[f"{eye}.x"] * w
+                    ey = cy - h / 2 + values[f"{eye}.y"] * h
+                    cv2.circle(canvas, (int(ex), int(ey)), 8, (0, 255, 255), 2)
+            label = f"face box, eyes found, smile {values['smile']:.0f}"
+        else:
+            mask = tracker.mask(image)
+            contours, _ = cv2.findContours(mask, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
+            contour = max(contours, key=cv2.contourArea)
+            cv2.drawContours(canvas, [cv2.convexHull(contour)], -1, (0, 255, 255), 2)
+            label = (f"openness {values['hand.openness']:.2f}, gaps "
+                     f"{values['hand.gaps']:.0f}")
+        cv2.putText(canvas, f"{name}: {label}", (10, 465), cv2.FONT_HERSHEY_SIMPLEX, 0.6,
+                    (255, 255, 255), 2, cv2.LINE_AA)
+        panels.append(cv2.resize(canvas, (400, 300), interpolation=cv2.INTER_AREA))
+    mosaic = np.vstack([np.hstack(panels[:2]), np.hstack(panels[2:])])
+    path.parent.mkdir(parents=True, exist_ok=True)
+    cv2.imwrite(str(path), mosaic, [cv2.IMWRITE_PNG_COMPRESSION, 9])
+    print(f"\nwrote {path} ({path.stat().st_size // 1024} KB)")
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="shorter runs")
+    parser.add_argument("--picture", default=None, metavar="PNG",
+                        help="also draw what the trackers find (docs/img/capture_trackers.png)")
     args = parser.parse_args()
     duration = 1.0 if args.quick else 3.0
     repeats = 20 if args.quick else 60
@@ -364,6 +413,8 @@ def main() -> int:
         bench_trackers(repeats)
         bench_hid_parse(repeats * 20)
         bench_store(duration, folder)
+    if args.picture:
+        draw_trackers(Path(args.picture))
     return 0
 
 

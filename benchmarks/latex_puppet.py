@@ -337,9 +337,10 @@ def cutaway(puppet: LatexPuppet, path: Path) -> None:
     camera = "side"
     with Scene3D(size=(640, 512), camera=camera, background=(236, 238, 240),
                  antialias=True) as scene:
-        scene.add(vertices, tri, colors=rgba, look=Look((1, 1, 1), roughness=0.8))
+        scene.add(vertices, tri, colors=rgba, look=Look((1, 1, 1), roughness=0.8,
+                                                        double_sided=True))
         scene.add(x, skin, colors=None, look=Look((0.45, 0.7, 0.35), roughness=0.5,
-                                                   use_vertex_colors=False))
+                                                   use_vertex_colors=False, double_sided=True))
         scene.frame()
         image = Image.fromarray(scene.render())
     draw = ImageDraw.Draw(image)

@@ -137,6 +137,7 @@ class StoreWriter:
     path : the new file (`.sqlite`); an existing file is an error unless overwrite=True.
     metadata : JSON dict stored with the file (replace later with `set_metadata`).
     commit_interval : [s] between background commits (<= 0.1; default 0.05).
+    created : ISO time to record as the creation time (default: now, UTC).
     max_pending : frames allowed to wait for a commit. When more wait, or the oldest waited
         1.5 commit intervals, the append commits in the appending thread (backpressure: a
         producer faster than the disk is slowed to the disk's pace instead of piling up frames
@@ -145,7 +146,7 @@ class StoreWriter:
 
     def __init__(self, path: str | os.PathLike, *, metadata: Mapping | None = None,
                  commit_interval: float = 0.05, overwrite: bool = False,
-                 max_pending: int = 5000):
+                 max_pending: int = 5000, created: str | None = None):
         if not 0 < commit_interval <= 0.1:
             raise ValueError(f"commit_interval must be in (0, 0.1] s so that a crash loses at "
                              f"most 100 ms, got {commit_interval!r}")
@@ -183,7 +184,8 @@ class StoreWriter:
         for statement in _SCHEMA.strip().split(";"):
             if statement.strip():
                 db.execute(statement)
-        meta = {"format": FORMAT, "schema_version": SCHEMA_VERSION, "created": _now_iso(),
+        meta = {"format": FORMAT, "schema_version": SCHEMA_VERSION,
+                "created": str(created) if created else _now_iso(),
                 "complete": False, "metadata": dict(metadata or {})}
         db.executemany("INSERT INTO meta(key, value) VALUES (?, ?)",
                        [(k, _json(v, f"metadata {k!r}")) for k, v in meta.items()])

@@ -38,11 +38,15 @@ class ForwardEngine:
         scores each frame (``frame_loglik[1]``) from the same predicted state distribution;
         None scores with the follower's own model
     prune : float: edge states of a track's support below this mass are dropped (0 = never)
+    scale_adaptation : (memory [frames], prior [frames], lowest, highest scale) or None: learn
+        each follower's emission scale online (sigma x scale, EM on one scalar per template,
+        see ``_kernels.template_step``); None keeps sigma as given
     """
 
     def __init__(self, templates: list[np.ndarray], sigmas: list[np.ndarray], windows: np.ndarray,
                  transitions: TransitionModel, *, cap: float, prune: float,
-                 recognition_sigmas: list[np.ndarray] | None = None):
+                 recognition_sigmas: list[np.ndarray] | None = None,
+                 scale_adaptation: tuple[float, float, float, float] | None = None):
         R = transitions.resolution
         if R > 1:
             # R states per template frame: the template and its sigma, linearly interpolated
@@ -101,6 +105,19 @@ class ForwardEngine:
         self._xs = np.zeros(self.channels)
         self._observed = np.zeros(self.channels)
         self._mix = np.zeros(M)
+        self.residual = np.zeros(S)
+        self.scale2 = np.ones(K)
+        self.scale_weight = np.zeros(K)
+        if scale_adaptation is None:
+            self.adapt = np.zeros(3)
+            self._scale_prior = 0.0
+        else:
+            memory, prior, lowest, highest = (float(v) for v in scale_adaptation)
+            if not (memory > 0 and prior >= 0 and 0 < lowest <= 1.0 <= highest):
+                raise ValueError(f"scale_adaptation needs memory > 0, prior >= 0 and "
+                                 f"0 < lowest <= 1 <= highest, got {scale_adaptation}")
+            self.adapt = np.array([np.exp(-1.0 / memory), lowest ** 2, highest ** 2])
+            self._scale_prior = prior
         self.reset()
 
     @property
@@ -117,6 +134,8 @@ class ForwardEngine:
         self.fresh[:] = True
         self.loglik[:] = 0.0
         self.frame_loglik[:] = 0.0
+        self.scale2[:] = 1.0
+        self.scale_weight[:] = self._scale_prior
 
     def check_frame(self, x) -> np.ndarray:
         arr = np.ascontiguousarray(x, dtype=np.float64)
@@ -134,7 +153,8 @@ class ForwardEngine:
             self.advance, self.advance_tail, self.advance_range, self.speed_change,
             self.initial_speed, self.restart,
             self.alpha, self.rowsum, self.logb, self.support, self.moments, self.main, self.fresh,
-            self.loglik, self.frame_loglik, self._xs, self._observed, self._mix)
+            self.loglik, self.frame_loglik, self._xs, self._observed, self._mix, self.adapt,
+            self.scale2, self.scale_weight, self.residual)
 
     def run(self, X: np.ndarray):
         """Step through ``X (N, D) float64``; returns progress, variance, log-likelihood, each
@@ -151,8 +171,8 @@ class ForwardEngine:
             self.advance, self.advance_tail, self.advance_range, self.speed_change,
             self.initial_speed, self.restart,
             self.alpha, self.rowsum, self.logb, self.support, self.moments, self.main, self.fresh,
-            self.loglik, self.frame_loglik, self._xs, self._observed, self._mix,
-            progress, variance, loglik)
+            self.loglik, self.frame_loglik, self._xs, self._observed, self._mix, self.adapt,
+            self.scale2, self.scale_weight, self.residual, progress, variance, loglik)
         return progress, variance, loglik
 
     def progress_of(self, k: int) -> tuple[float, float]:

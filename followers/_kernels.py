@@ -61,10 +61,12 @@ def prepare_frame(x, lower, upper, xs, observed):
 
 @nb.njit(cache=True, fastmath={"reassoc", "contract"})
 def _emission_rows(templates, weights, log_norm, log_norm_sum, first, last, xs, observed,
-                   all_observed, cap, dual, out):
+                   all_observed, cap, dual, inv_scale2, norm_shift, out, residual):
     # out[e, j] = sum over observed d of -0.5 * min(w[e, j, d] * (x[d] - template[j, d])**2, cap)
-    #             + log_norm[e, j, d], for rows first..last; e = 0 the follower's model,
-    #             e = 1 the recognition model (only when dual, else a copy of e = 0)
+    #             + log_norm[e, j, d], for rows first..last; e = 0 the follower's model, whose
+    #             sigma is multiplied by the online scale (w / scale**2; norm_shift =
+    #             -n_obs * log(scale)), e = 1 the recognition model (only when dual, else a copy
+    #             of e = 0). residual[j]: the capped sum of squared z-scores of model 0.
     D = xs.shape[0]
     for j in range(first, last + 1):
         acc = 0.0
@@ -73,14 +75,14 @@ def _emission_rows(templates, weights, log_norm, log_norm_sum, first, last, xs, 
             for d in range(D):
                 diff = xs[d] - templates[j, d]
                 sq = observed[d] * diff * diff
-                v = weights[0, j, d] * sq
+                v = weights[0, j, d] * sq * inv_scale2
                 acc += v if v < cap else cap
                 v = weights[1, j, d] * sq
                 acc_rec += v if v < cap else cap
         else:
             for d in range(D):
                 diff = xs[d] - templates[j, d]
-                v = weights[0, j, d] * observed[d] * diff * diff
+                v = weights[0, j, d] * observed[d] * diff * diff * inv_scale2
                 acc += v if v < cap else cap
         if all_observed:
             norm = log_norm_sum[0, j]
@@ -91,7 +93,8 @@ def _emission_rows(templates, weights, log_norm, log_norm_sum, first, last, xs, 
             for d in range(D):
                 norm += log_norm[0, j, d] * observed[d]
                 norm_rec += log_norm[1, j, d] * observed[d]
-        out[0, j] = norm - 0.5 * acc
+        residual[j] = acc
+        out[0, j] = norm + norm_shift - 0.5 * acc
         out[1, j] = (norm_rec - 0.5 * acc_rec) if dual else out[0, j]
 
 
@@ -242,7 +245,7 @@ def _predictive_loglik(rowsum, logb, model, support, k, off):
 def template_step(k, templates, offsets, lengths, half_windows, weights, log_norm, log_norm_sum,
                   xs, observed, n_obs, cap, dual, prune, advance, advance_tail, advance_range,
                   speed_change, initial_speed, restart, alpha, rowsum, logb, support, moments,
-                  main, fresh, loglik, frame_loglik, mix):
+                  main, fresh, loglik, frame_loglik, mix, adapt, scale2, scale_weight, residual):
     """One frame of the windowed forward algorithm for template ``k`` (see the module docstring
     for the layout). ``weights (2, S, D)``: 1 / sigma**2 per model and state; ``log_norm
     (2, S, D)``: -0.5 log(2 pi sigma**2), ``log_norm_sum (2, S)`` its sum over channels;
@@ -338,24 +341,30 @@ def template_step(k, templates, offsets, lengths, half_windows, weights, log_nor
     has_main = m_last >= m_first
     has_entry = e_last >= e_first
     shift = 0.0
+    s2 = scale2[k]
+    inv_scale2 = 1.0 / s2
+    norm_shift = -0.5 * n_obs * math.log(s2)
     if n_obs > 0:
         all_observed = n_obs == xs.shape[0]
         if has_main:
             _emission_rows(templates, weights, log_norm, log_norm_sum, off + m_first,
-                           off + m_last, xs, observed, all_observed, cap, dual, logb)
+                           off + m_last, xs, observed, all_observed, cap, dual, inv_scale2, norm_shift, logb,
+                           residual)
         if has_entry:
             # only the rows the main track did not already cover
             if not has_main or e_last < m_first or e_first > m_last:
                 _emission_rows(templates, weights, log_norm, log_norm_sum, off + e_first,
-                               off + e_last, xs, observed, all_observed, cap, dual, logb)
+                               off + e_last, xs, observed, all_observed, cap, dual, inv_scale2, norm_shift, logb,
+                           residual)
             else:
                 if e_first < m_first:
                     _emission_rows(templates, weights, log_norm, log_norm_sum, off + e_first,
                                    off + m_first - 1, xs, observed, all_observed, cap, dual,
-                                   logb)
+                                   inv_scale2, norm_shift, logb, residual)
                 if e_last > m_last:
                     _emission_rows(templates, weights, log_norm, log_norm_sum, off + m_last + 1,
-                                   off + e_last, xs, observed, all_observed, cap, dual, logb)
+                                   off + e_last, xs, observed, all_observed, cap, dual, inv_scale2, norm_shift, logb,
+                           residual)
         if dual:
             frame_loglik[1, k] = _predictive_loglik(rowsum, logb, 1, support, k, off)
         shift = -np.inf
@@ -411,6 +420,22 @@ def template_step(k, templates, offsets, lengths, half_windows, weights, log_nor
             rowsum[t, r] *= inv
             for m in range(M):
                 alpha[t, r, m] *= inv
+    if adapt[0] > 0.0 and n_obs > 0:
+        # EM on the emission scale: its maximum-likelihood value given this frame is the
+        # posterior-expected squared z-score per channel (in units of the unscaled sigma);
+        # a forgetful mean of it over recent frames becomes the scale of the next frames
+        expected = 0.0
+        for t in range(2):
+            for j in range(support[k, t, 0], support[k, t, 1] + 1):
+                expected += rowsum[t, off + j] * residual[off + j]
+        target = s2 * expected / n_obs
+        scale_weight[k] = adapt[0] * scale_weight[k] + 1.0
+        s2 += (target - s2) / scale_weight[k]
+        if s2 < adapt[1]:
+            s2 = adapt[1]
+        elif s2 > adapt[2]:
+            s2 = adapt[2]
+        scale2[k] = s2
     step_ll = math.log(c) + shift
     frame_loglik[0, k] = step_ll
     if not dual:
@@ -466,7 +491,7 @@ def template_step(k, templates, offsets, lengths, half_windows, weights, log_nor
 def bank_step(x, lower, upper, templates, offsets, lengths, half_windows, weights, log_norm,
               log_norm_sum, cap, dual, prune, advance, advance_tail, advance_range, speed_change,
               initial_speed, restart, alpha, rowsum, logb, support, moments, main, fresh, loglik,
-              frame_loglik, xs, observed, mix):
+              frame_loglik, xs, observed, mix, adapt, scale2, scale_weight, residual):
     """One frame for all K templates. ``x (D,)`` is the raw input frame. Returns the number of
     observed channels."""
     n_obs = prepare_frame(x, lower, upper, xs, observed)
@@ -474,7 +499,8 @@ def bank_step(x, lower, upper, templates, offsets, lengths, half_windows, weight
         template_step(k, templates, offsets, lengths, half_windows, weights, log_norm,
                       log_norm_sum, xs, observed, n_obs, cap, dual, prune, advance, advance_tail,
                       advance_range, speed_change, initial_speed, restart, alpha, rowsum, logb,
-                      support, moments, main, fresh, loglik, frame_loglik, mix)
+                      support, moments, main, fresh, loglik, frame_loglik, mix, adapt, scale2,
+                      scale_weight, residual)
     return n_obs
 
 
@@ -482,8 +508,8 @@ def bank_step(x, lower, upper, templates, offsets, lengths, half_windows, weight
 def follow_sequence(X, lower, upper, templates, offsets, lengths, half_windows, weights, log_norm,
                     log_norm_sum, cap, dual, prune, advance, advance_tail, advance_range,
                     speed_change, initial_speed, restart, alpha, rowsum, logb, support, moments,
-                    main, fresh, loglik, frame_loglik, xs, observed, mix, out_progress,
-                    out_variance, out_loglik):
+                    main, fresh, loglik, frame_loglik, xs, observed, mix, adapt, scale2,
+                    scale_weight, residual, out_progress, out_variance, out_loglik):
     """Run ``bank_step`` over the rows of ``X (N, D)``; write each template's main-track
     progress and variance (in [0, 1] units) and cumulative log-likelihood into
     ``out_* (N, K)``."""
@@ -492,7 +518,8 @@ def follow_sequence(X, lower, upper, templates, offsets, lengths, half_windows, 
         bank_step(X[n], lower, upper, templates, offsets, lengths, half_windows, weights,
                   log_norm, log_norm_sum, cap, dual, prune, advance, advance_tail, advance_range,
                   speed_change, initial_speed, restart, alpha, rowsum, logb, support, moments,
-                  main, fresh, loglik, frame_loglik, xs, observed, mix)
+                  main, fresh, loglik, frame_loglik, xs, observed, mix, adapt, scale2,
+                  scale_weight, residual)
         for k in range(K):
             scale = 1.0 / (lengths[k] - 1)
             t = main[k]

@@ -16,6 +16,17 @@ DEFAULT_OUTLIER_SIGMAS = 5.0
 # the default models drop states at the edges of the posterior holding less than this mass
 # (beam pruning): a confident follower then touches a few states, not the whole window
 PRUNE_MASS = 1e-8
+# online emission scale of the default models when sigma is estimated (not given): memory
+# [frames], prior weight of scale 1 [frames], lowest and highest scale of the estimated sigma
+SCALE_ADAPTATION = (30.0, 1.0, 0.1, 2.0)
+
+
+def resolve_adaptation(adapt_sigma, sigma_given: bool, kind: str):
+    if adapt_sigma is None:
+        adapt_sigma = not sigma_given and kind != "mop"
+    if not isinstance(adapt_sigma, (bool, np.bool_)):
+        raise TypeError(f"adapt_sigma must be True, False or None, got {adapt_sigma!r}")
+    return SCALE_ADAPTATION if adapt_sigma else None
 
 
 @dataclass(frozen=True, slots=True)
@@ -87,7 +98,7 @@ class Follower:
     """
 
     def __init__(self, template, *, sigma=None, window=None, transitions="speed",
-                 outlier_sigmas=None):
+                 outlier_sigmas=None, adapt_sigma=None):
         tmpl = as_template(template)
         model = resolve_transitions(transitions)
         T, D = tmpl.shape
@@ -97,7 +108,8 @@ class Follower:
         self._engine = ForwardEngine(
             [tmpl], [self._sigma], np.array([self._window]), model,
             cap=resolve_cap(outlier_sigmas, model.kind),
-            prune=0.0 if model.kind == "mop" else PRUNE_MASS)
+            prune=0.0 if model.kind == "mop" else PRUNE_MASS,
+            scale_adaptation=resolve_adaptation(adapt_sigma, sigma is not None, model.kind))
         self._template = tmpl
         self._template.setflags(write=False)
 

@@ -35,7 +35,7 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         return 130
-    except (ValueError, FileNotFoundError, TypeError) as error:
+    except (ValueError, TypeError, OSError) as error:
         # Bad input from the user: one clear line, no traceback.
         print(f"mop {args.command}: error: {error}", file=sys.stderr)
         return 1

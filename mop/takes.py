@@ -466,7 +466,8 @@ class TakeStore:
             raise FileExistsError(f"take {name!r} already exists in {self.path} (pass "
                                   f"overwrite=True to replace it)")
         meta = take.metadata()
-        with StoreWriter(path, metadata=meta, overwrite=overwrite) as writer:
+        with StoreWriter(path, metadata=meta, overwrite=overwrite,
+                         created=take.created or None) as writer:
             if take.motion is not None:
                 writer.put_attachment(MOTION_ATTACHMENT, take.motion.to_dict())
             for stream_name, stream in take.streams.items():

@@ -175,8 +175,9 @@ def test_face_follows_a_photograph_moved_along_a_known_path(tmp_path):
     count = 10
     frames, offsets = face_frames(count)
     frames.append(np.full((H, W, 3), 90, np.uint8))            # nobody there
+    frames.append(frames[0])                                   # back, far from where it left
     video = write_video(tmp_path / "face.mkv", frames)
-    source, values, _ = read_all(f"camera:{video}:face", count + 1)
+    source, values, _ = read_all(f"camera:{video}:face", count + 2)
     centre = values[:count, :2] * [W, H]
     # the face moves with the photo: its centre relative to the photo stays put
     relative = centre - offsets
@@ -197,6 +198,8 @@ def test_face_follows_a_photograph_moved_along_a_known_path(tmp_path):
     assert np.all(left_eye[~np.isnan(left_eye[:, 0]), 0] < 0.5)
     assert set(values[:count, 8].tolist()) <= {0.0, 1.0}
     assert np.isnan(values[count]).all()
+    # lost, then found again by a search of the whole image
+    np.testing.assert_allclose(values[count + 1, :4], values[0, :4], atol=4 / W)
 
 
 # -- hand silhouette ---------------------------------------------------------------------------

@@ -109,3 +109,24 @@ def test_closed_scene_refuses_to_render_and_bad_options_fail():
         handle = empty.add(np.zeros((3, 3)) + np.eye(3), np.array([[0, 1, 2]]))
         with pytest.raises(ValueError, match="expected 3 vertices"):
             empty.update(handle, np.zeros((4, 3)))
+
+
+class _Stepping(_Blob):
+    """A blob that grows by its 'grow' target each step."""
+
+    target_names = ("grow",)
+
+    def step(self, dt, targets):
+        self.x = self.rest * (1.0 + targets.get("grow", 0.0))
+
+
+def test_record_writes_one_png_per_frame(tmp_path):
+    from PIL import Image
+    from mop.render.scene3d import record
+    blob = _Stepping()
+    count = record(blob, [{"grow": g} for g in (0.0, 0.3, 0.6)], tmp_path / "frames",
+                   size=SIZE, camera="front", background="transparent")
+    files = sorted((tmp_path / "frames").glob("*.png"))
+    assert count == 3 and len(files) == 3
+    shares = [np.asarray(Image.open(f).convert("RGBA"))[..., 3].astype(bool).mean() for f in files]
+    assert shares[0] < shares[1] < shares[2]

@@ -5,7 +5,6 @@ import hashlib
 import re
 import signal
 import socket
-import subprocess
 import time
 
 import numpy as np
@@ -13,20 +12,22 @@ import pytest
 
 from mop.session import Mode, load_session
 from mop.session.build import Overrides, build_session
-from session_files import (TAKES, free_udp_port, mop_command, mop_process, session_text,
-                           write_session)
+from session_files import TAKES, free_udp_port, mop_process, session_text, write_session
 
 
 class FrameLog:
-    """An output that keeps a digest of every frame and the states (for comparisons)."""
+    """An output that keeps every frame, the states, and a digest of every puppet's surface."""
 
     def __init__(self):
-        self.digests, self.states = [], []
+        self.frames, self.states, self.surfaces = [], [], []
+        self.session = None
 
     def write(self, frame, state, *, repeat=False):
-        self.digests.append(hashlib.sha1(frame.tobytes()).hexdigest() if frame is not None
-                            else None)
+        self.frames.append(frame.copy())
         self.states.append(state)
+        self.surfaces.append(tuple(
+            hashlib.sha1(np.ascontiguousarray(c.puppet.surface()).tobytes()).hexdigest()
+            for c in self.session.characters))
 
     def close(self):
         pass
@@ -35,6 +36,7 @@ class FrameLog:
 def replay(path, *, duration):
     log = FrameLog()
     session = build_session(load_session(path), mode=Mode.REPLAY, extra_outputs=[log])
+    log.session = session
     report = session.run(duration=duration)
     return session, report, log
 
@@ -43,10 +45,23 @@ def test_two_performers_three_characters_replayed_twice_give_identical_frames(tm
     path = write_session(tmp_path)
     first, report, log_a = replay(path, duration=4.4)
     second, _, log_b = replay(path, duration=4.4)
-    assert report.frames == 110 and len(log_a.digests) == 110
-    assert log_a.digests == log_b.digests
+    assert report.frames == 110 and len(log_a.frames) == 110
+    # what the followers said, every target, every puppet's geometry: bit for bit the same
+    assert log_a.states == log_b.states
+    assert log_a.surfaces == log_b.surfaces
+    # the pictures: the 2D renderer and the compositing are exact; Mesa's software rasteriser
+    # (llvmpipe, behind pyrender) is not quite: about one frame in fifty may have one pixel one
+    # level off in a 3D character, so that much is allowed and no more
+    differing = [k for k, (a, b) in enumerate(zip(log_a.frames, log_b.frames))
+                 if not np.array_equal(a, b)]
+    assert len(differing) <= 3, differing
+    for k in differing:
+        delta = np.abs(log_a.frames[k].astype(int) - log_b.frames[k]).max(axis=-1)
+        assert delta.max() <= 1 and np.count_nonzero(delta) <= 4
+        assert not delta[:, :int(0.55 * delta.shape[1])].any()   # never in the 2D cut-out
     # ... and the frames are not trivially equal: the characters moved
-    assert len(set(log_a.digests)) > 90
+    digests = {hashlib.sha1(frame.tobytes()).hexdigest() for frame in log_a.frames}
+    assert len(digests) > 90
     # the followers recognised what was performed, and momo listened to both performers
     assert {"glove_ripple", "glove_chomp"} <= first.performers[0].seen
     assert {"hand_circle", "hand_lift"} <= first.performers[1].seen
@@ -137,7 +152,8 @@ def wait_for_line(stream, pattern, timeout):
         match = re.search(pattern, line)
         if match:
             return match
-    raise AssertionError(f"no line matching {pattern!r} within {timeout} s; got {seen[-10:]}")
+    raise AssertionError(f"no line matching {pattern!r} within {timeout} s (or the stream "
+                         f"ended); last lines: {seen[-10:]}")
 
 
 def test_timing_on_request_and_ctrl_c_leaves_a_playable_video(tmp_path):
@@ -147,9 +163,9 @@ def test_timing_on_request_and_ctrl_c_leaves_a_playable_video(tmp_path):
     process = mop_process("perform", path, "--realtime", "--loop", "--out", video)
     try:
         wait_for_line(process.stderr, r"^frame (\d+) ", timeout=60)
-        wait_for_line(process.stderr, r"^frame (\d+) ", timeout=10)   # ~2 s of show
+        wait_for_line(process.stderr, r"^frame (\d+) ", timeout=30)   # ~2 s of show
         process.send_signal(signal.SIGUSR1)                      # timing on request
-        wait_for_line(process.stderr, r"^\s+simulate\s+[\d.]+", timeout=10)
+        wait_for_line(process.stderr, r"^\s+simulate\s+[\d.]+", timeout=30)
         process.send_signal(signal.SIGINT)
         out, err = process.communicate(timeout=30)
     finally:

@@ -51,6 +51,9 @@ def test_save_load_list_delete(tmp_path, rng):
     assert loaded.stream.device == {"kind": "osc"}
     assert loaded.calibration == {"range": [0, 1]} and loaded.alignment == take.alignment
     assert loaded.complete and loaded.problems == [] and loaded.created
+    take.created = "2024-06-11T00:00:00+00:00"
+    assert store.load(store.save(take, name="dated")).created == take.created
+    store.delete("dated")
     store.save(sample_take(rng, performer="bo", action="nod"))
     infos = store.list()
     assert [i.name for i in infos] == ["ana-wave-001", "bo-nod-001"]
@@ -213,6 +216,7 @@ def test_a_recording_killed_with_sigkill_keeps_all_but_the_last_100_ms(tmp_path,
     child.send_signal(signal.SIGKILL)
     child.wait(10)
     reader.join(10)
+    child.stdout.close()
     captured = [(int(k), float(t)) for k, t in (line.split() for line in lines if line.strip())]
     assert child.returncode == -signal.SIGKILL and len(captured) > 50
 
@@ -252,8 +256,9 @@ def test_takes_commands(tmp_path, rng, capsys, monkeypatch):
     assert main(["takes", "--recordings", str(folder), "export", name,
                  "--out", str(tmp_path / "x.npz")]) == 0
     assert (tmp_path / "x.npz").is_file()
-    monkeypatch.setattr(sys, "stdin", open(os.devnull))
-    assert main(["takes", "--recordings", str(folder), "delete", name]) == 1
+    with open(os.devnull) as null:
+        monkeypatch.setattr(sys, "stdin", null)
+        assert main(["takes", "--recordings", str(folder), "delete", name]) == 1
     assert "refusing to delete" in capsys.readouterr().err
     assert main(["takes", "--recordings", str(folder), "delete", name, "--yes"]) == 0
     assert store.names() == []
@@ -316,6 +321,12 @@ def test_record_command_errors(tmp_path, capsys):
                  str(tmp_path / "m.json"), "--source", "glove:1",
                  "--recordings", str(tmp_path), "--preview", "none"]) == 1
     assert "KIND one of" in capsys.readouterr().err
+    # a device that is not plugged in: one line, no traceback, nothing stored
+    assert main(["record", "--performer", "bo", "--action", "wave", "--motion",
+                 str(tmp_path / "m.json"), "--source", "hid:p5",
+                 "--recordings", str(tmp_path / "none"), "--preview", "none"]) == 1
+    assert "no HID device fits profile 'p5'" in capsys.readouterr().err
+    assert TakeStore(tmp_path / "none").names() == []
 
 
 def test_devices_command(capsys):

@@ -252,7 +252,9 @@ class FaceTracker(Tracker):
     the upper face); smile (1 when the smile cascade fires in the lower half of the face, else
     0). NaN when not found (Haar eye detection often misses one eye behind glasses).
 
-    detect_width : [px] faces are searched on a copy scaled to this width (speed).
+    detect_width : [px] faces are searched on a copy scaled to this width (speed). Once a face
+        is found, the next frame is searched near it first, at about its size (`reset()`
+        forgets it).
     feature_width : [px] eyes and smile are searched on the face box scaled to this width.
     """
     name = "face"
@@ -286,9 +288,34 @@ class FaceTracker(Tracker):
             raise ValueError(f"feature_width must be >= 60 px, got {feature_width}")
         self.feature_width = int(feature_width)
         self._face_image: np.ndarray | None = None
+        self._previous: tuple[int, int, int, int] | None = None   # last face, detect scale
         self.channels = ("face.x", "face.y", "face.w", "face.h", "eye_left.x", "eye_left.y",
                          "eye_right.x", "eye_right.y", "smile")
         self._gray = self._small = None
+
+    def reset(self) -> None:
+        """Forget the last face (the next frame is searched whole)."""
+        self._previous = None
+
+    def _search_near_previous(self, small_size) -> list:
+        """Faces near last frame's face, at about its size: a face moves little between
+        frames, and this scans far fewer windows than the whole image. [] when there was no
+        face or it is not there any more (then the whole image is searched)."""
+        if self._previous is None:
+            return []
+        x, y, w, h = self._previous
+        margin = w // 2
+        x0, y0 = max(0, x - margin), max(0, y - margin)
+        x1 = min(small_size[0], x + w + margin)
+        y1 = min(small_size[1], y + h + margin)
+        region = self._small[y0:y1, x0:x1]
+        low, high = max(24, int(w * 0.75)), int(w * 1.35)
+        if region.shape[0] < low or region.shape[1] < low:
+            return []
+        faces = self._face.detectMultiScale(region, scaleFactor=1.1,
+                                            minNeighbors=self.face_neighbors,
+                                            minSize=(low, low), maxSize=(high, high))
+        return [(fx + x0, fy + y0, fw, fh) for fx, fy, fw, fh in faces]
 
     def describe(self) -> dict:
         return {"tracker": self.name, "detect_width": self.detect_width,
@@ -308,13 +335,18 @@ class FaceTracker(Tracker):
         cv2.cvtColor(image, cv2.COLOR_BGR2GRAY, dst=self._gray)
         cv2.resize(self._gray, small_size, dst=self._small, interpolation=cv2.INTER_AREA)
         out = np.full(len(self.channels), np.nan)
-        smallest = max(24, int(self.min_face * small_size[0]))
-        faces = self._face.detectMultiScale(self._small, scaleFactor=1.15,
-                                            minNeighbors=self.face_neighbors,
-                                            minSize=(smallest, smallest))
+        faces = self._search_near_previous(small_size)
         if len(faces) == 0:
+            smallest = max(24, int(self.min_face * small_size[0]))
+            faces = self._face.detectMultiScale(self._small, scaleFactor=1.15,
+                                                minNeighbors=self.face_neighbors,
+                                                minSize=(smallest, smallest))
+        if len(faces) == 0:
+            self._previous = None
             return out
-        x, y, w, h = (float(v) / factor for v in max(faces, key=lambda f: f[2] * f[3]))
+        best = max(faces, key=lambda f: f[2] * f[3])
+        self._previous = tuple(int(v) for v in best)
+        x, y, w, h = (float(v) / factor for v in best)
         out[0:4] = ((x + w / 2) / width, (y + h / 2) / height, w / width, h / height)
         x0, y0 = max(0, int(round(x))), max(0, int(round(y)))
         x1, y1 = min(width, int(round(x + w))), min(height, int(round(y + h)))

@@ -112,7 +112,7 @@ def _colours(vertices: np.ndarray) -> np.ndarray:
     return out
 
 
-def generate(edge_length: float = 0.005):
+def generate(edge_length: float = 0.0065):
     """Build the frog: vertices (V, 3) float [m], faces (F, 3) int64, colours (V, 4) uint8,
     and the sidecar dict (finger regions, landmarks)."""
     import manifold3d
@@ -178,7 +178,7 @@ def _sidecar(vertices: np.ndarray, faces: np.ndarray) -> dict:
     return sidecar
 
 
-def write(directory: Path = DATA, *, edge_length: float = 0.005) -> tuple[Path, Path]:
+def write(directory: Path = DATA, *, edge_length: float = 0.0065) -> tuple[Path, Path]:
     """Generate and write froggy.ply (with vertex colours) and froggy.json into directory."""
     import trimesh
     vertices, faces, colours, sidecar = generate(edge_length)

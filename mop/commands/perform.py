@@ -1,7 +1,6 @@
 """`mop perform SESSION`: run a session live (or replayed from takes) to its outputs."""
 from __future__ import annotations
 
-import argparse
 import signal
 import sys
 import time

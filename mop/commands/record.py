@@ -11,7 +11,6 @@ takes: how confusable it is with them (`followers.confusability`).
 from __future__ import annotations
 
 import sys
-import time
 from pathlib import Path
 
 PREVIEW_SIZE = (640, 360)
@@ -207,6 +206,17 @@ def _bar(fraction: float, width: int = 30) -> str:
 
 
 def run(args) -> int:
+    try:
+        return _record(args)
+    except OSError as error:
+        if isinstance(error, FileNotFoundError):
+            raise
+        # a device that is not there or went silent: one clear line, like bad input
+        print(f"mop record: error: {error}", file=sys.stderr)
+        return 1
+
+
+def _record(args) -> int:
     from capture import open_source
     from mop.takes import TakeStore, check_name, performer_templates
 
@@ -251,10 +261,15 @@ def run(args) -> int:
         while source.read(timeout=0) is not None:
             pass
         start = clock.now()
+        info = source.describe()
+        # what later processing of this take needs to interpret its numbers
+        calibration = {key: info[key] for key in ("camera_matrix", "dist_coeffs",
+                                                  "marker_length", "units", "frame_size")
+                       if info.get(key) is not None}
         recorder = store.record(performer=args.performer, action=args.action,
                                 channels=source.channels or None, motion=motion,
-                                rate=args.rate, device=args.source,
-                                device_info=source.describe(), stream_rate=source.rate,
+                                rate=args.rate, device=args.source, device_info=info,
+                                calibration=calibration, stream_rate=source.rate,
                                 name=args.name, start=start,
                                 extra={"preview": str(preview) if preview else None})
         print(f"  GO - recording {recorder.name} for {duration:.2f} s", flush=True)
@@ -288,12 +303,13 @@ def run(args) -> int:
             raise OSError(f"{args.source}: only {recorder.frames} frame(s) arrived during the "
                           f"{duration:.2f} s take; nothing stored")
         name = recorder.finish(alignment=alignment)
-    except KeyboardInterrupt:
+    except BaseException as error:
         if recorder is not None:
-            recorder.abort()
-            print(f"\ninterrupted: the partial take is kept as {recorder.name} (marked "
-                  f"interrupted); delete it with `mop takes delete {recorder.name}`",
-                  file=sys.stderr)
+            recorder.abort()            # no-op when it was finished or discarded already
+            if isinstance(error, KeyboardInterrupt):
+                print(f"\ninterrupted: the partial take is kept as {recorder.name} (marked "
+                      f"interrupted); delete it with `mop takes delete {recorder.name}`",
+                      file=sys.stderr)
         raise
     finally:
         source.close()

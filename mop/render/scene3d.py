@@ -47,12 +47,15 @@ _JIT = dict(cache=True, nogil=True, error_model="numpy")
 @dataclass(frozen=True)
 class Look:
     """A surface material: base colour (r, g, b) in 0..1, roughness, metallic, and whether
-    vertex colours (when the mesh has them) tint the base colour."""
+    vertex colours (when the mesh has them) tint the base colour. Closed surfaces draw their
+    front faces only (back-face culling halves a software rasteriser's work); set double_sided
+    for open or cut meshes."""
 
     base_color: tuple = (0.42, 0.68, 0.32)
     roughness: float = 0.38
     metallic: float = 0.0
     use_vertex_colors: bool = True
+    double_sided: bool = False
 
 
 #: Named looks. "latex": painted latex rubber, a soft sheen; "matte": foam / cloth; "clay".
@@ -222,7 +225,7 @@ class _Item:
             kwargs["color_0"] = rgba
         material = pyrender.MetallicRoughnessMaterial(
             baseColorFactor=(*look.base_color, 1.0), metallicFactor=look.metallic,
-            roughnessFactor=look.roughness, doubleSided=True)
+            roughnessFactor=look.roughness, doubleSided=look.double_sided)
         self.primitive = pyrender.Primitive(material=material, **kwargs)
         self.mesh = pyrender.Mesh([self.primitive], name=name)
         stride = 6 + (4 if "color_0" in kwargs else 0)
@@ -390,7 +393,7 @@ class Scene3D:
         self._check_open()
         if not self._items:
             raise ValueError("the scene is empty: add a mesh before rendering")
-        flags = pyrender.RenderFlags.RGBA | pyrender.RenderFlags.SKIP_CULL_FACES
+        flags = pyrender.RenderFlags.RGBA
         color, _ = self._renderer.render(self._scene, flags=flags)
         self._frames += 1
         return np.array(color)  # own the pixels: GL reuses its buffer
@@ -425,3 +428,25 @@ class Scene3D:
     def __repr__(self) -> str:
         state = "closed" if self.closed else f"{len(self._items)} meshes"
         return f"Scene3D({self.size[0]}x{self.size[1]}, {state})"
+
+
+def record(puppet, targets, path, *, fps: float = 25.0, size=(720, 576),
+           camera="three_quarter", background="chroma", antialias: bool = False) -> int:
+    """Step a puppet through `targets` (an iterable of {name: value} dicts, one per frame) and
+    write each rendered frame to `path` through mop.export.open_writer (video, GIF or PNG
+    sequence, chosen by the path). Returns the number of frames written."""
+    from mop.export import open_writer
+    fps = float(fps)
+    if not fps > 0:
+        raise ValueError(f"fps must be > 0, got {fps}")
+    count = 0
+    with Scene3D(size=size, camera=camera, background=background, antialias=antialias) as scene, \
+            open_writer(path, fps=fps, size=tuple(size),
+                        background=None if background == "transparent" else background) as writer:
+        handle = scene.add(puppet)
+        for frame_targets in targets:
+            puppet.step(1.0 / fps, frame_targets)
+            scene.update(handle)
+            writer.write(scene.render())
+            count += 1
+    return count

@@ -6,15 +6,14 @@ needs is built here, once, before the first frame.
 from __future__ import annotations
 
 import logging
-import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Mapping
 
 import numpy as np
 
-from .config import (ActionBinding, Background, CharacterConfig, CharacterKind, Normalise,
-                     PerformerConfig, REPLAY_PREFIX, SessionConfig, SessionError)
+from .config import (REPLAY_PREFIX, Background, CharacterConfig, Normalise, PerformerConfig,
+                     SessionConfig, SessionError)
 from .feeds import SourceFeed, TakeFeed
 from .loop import CharacterRuntime, Mode, PerformerRuntime, Session, Track
 

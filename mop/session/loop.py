@@ -20,7 +20,7 @@ import enum
 import logging
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any, Mapping, Sequence
 
 import numpy as np
@@ -81,6 +81,8 @@ class PerformerRuntime:
         self.was_ok = feed.status == OK
         self.message = ""
         self.seen: set[str] = set()
+        self.problem = ""            # why the input cannot be followed right now, if it cannot
+        self._reported = ""
         self._feed_channels: tuple[str, ...] | None = None
         self._select: np.ndarray | None = None
         self._x = np.empty(len(self.channels))
@@ -126,7 +128,14 @@ class PerformerRuntime:
                 self._following = False
             self.state = FollowState()
             return
-        out = self.bank.step(self.prepare(self.values))
+        try:
+            x = self.prepare(self.values)
+        except ValueError as error:  # e.g. the source does not carry the channels asked for
+            self.problem = str(error)
+            self.state = FollowState()
+            return
+        self.problem = ""
+        out = self.bank.step(x)
         self._following = True
         self._last = out
         state = self.state
@@ -186,7 +195,9 @@ class Track:
         weight = 1.0 if self.blend <= 0 else smoothstep((t - self.blend_start) / self.blend)
         self.weight = weight
         goal: dict[str, np.ndarray] = {}
-        if active is not None:
+        if active is None:
+            self.progress = 0.0
+        else:
             motion, channels = self.motions[active]
             self.progress = min(max(state.progress, 0.0), 1.0)
             sample = motion.sample(self.progress * motion.duration)
@@ -272,6 +283,12 @@ class Session:
         captured = clock()
         for performer in self.performers:
             performer.follow()
+            if performer.problem != performer._reported:
+                performer._reported = performer.problem
+                if performer.problem:
+                    self.events.append({"t": t, "performer": performer.name, "status": "failed",
+                                        "message": performer.problem})
+                    log.warning("performer %s: %s", performer.name, performer.problem)
         followed = clock()
         for character in self.characters:
             targets = character.targets
@@ -406,7 +423,8 @@ class Session:
         return {
             "session": self.name, "frame": self.frame_index, "t": self.t,
             "mode": self.mode.value, "fps": self.fps,
-            "performers": {p.name: {"status": p.status, "message": p.feed.message,
+            "performers": {p.name: {"status": "failed" if p.problem else p.status,
+                                    "message": p.problem or p.feed.message,
                                     **p.state.as_dict(), "posterior": p.posterior()}
                            for p in self.performers},
             "characters": {c.name: {

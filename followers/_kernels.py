@@ -14,6 +14,10 @@ Layout shared by every kernel (K templates stacked, ``S = sum(T_k)`` states in a
 - ``loglik (K,) float64``: log-likelihood of everything since reset; ``frame_loglik (2, K)``:
   of the last frame alone, under the follower's emission model (row 0) and under the bank's
   recognition model (row 1; a copy of row 0 unless ``dual``).
+- ``adapt (3,) float64``: [forgetting factor, lowest, highest scale**2] of the emission scale
+  learned online (factor 0: fixed); ``scale2 (K,)``: each template's current scale**2, which
+  multiplies model 0's sigma**2; ``scale_weight (K,)``: the forgetful count behind it;
+  ``residual (S,)``: scratch, each state's capped sum of squared z-scores this frame.
 
 The emission of state ``j`` is ``sum over observed channels d`` of
 ``-0.5 * min(w[e, j, d] * (x[d] - template[j, d])**2, cap) - 0.5 * log(2 pi sigma[e, j, d]**2)``
@@ -348,14 +352,14 @@ def template_step(k, templates, offsets, lengths, half_windows, weights, log_nor
         all_observed = n_obs == xs.shape[0]
         if has_main:
             _emission_rows(templates, weights, log_norm, log_norm_sum, off + m_first,
-                           off + m_last, xs, observed, all_observed, cap, dual, inv_scale2, norm_shift, logb,
-                           residual)
+                           off + m_last, xs, observed, all_observed, cap, dual, inv_scale2,
+                           norm_shift, logb, residual)
         if has_entry:
             # only the rows the main track did not already cover
             if not has_main or e_last < m_first or e_first > m_last:
                 _emission_rows(templates, weights, log_norm, log_norm_sum, off + e_first,
-                               off + e_last, xs, observed, all_observed, cap, dual, inv_scale2, norm_shift, logb,
-                           residual)
+                               off + e_last, xs, observed, all_observed, cap, dual,
+                               inv_scale2, norm_shift, logb, residual)
             else:
                 if e_first < m_first:
                     _emission_rows(templates, weights, log_norm, log_norm_sum, off + e_first,
@@ -363,8 +367,8 @@ def template_step(k, templates, offsets, lengths, half_windows, weights, log_nor
                                    inv_scale2, norm_shift, logb, residual)
                 if e_last > m_last:
                     _emission_rows(templates, weights, log_norm, log_norm_sum, off + m_last + 1,
-                                   off + e_last, xs, observed, all_observed, cap, dual, inv_scale2, norm_shift, logb,
-                           residual)
+                                   off + e_last, xs, observed, all_observed, cap, dual,
+                               inv_scale2, norm_shift, logb, residual)
         if dual:
             frame_loglik[1, k] = _predictive_loglik(rowsum, logb, 1, support, k, off)
         shift = -np.inf

@@ -377,3 +377,27 @@ def test_bank_survives_hostile_frames(rng, actions):
     trace = bank.follow(X)
     for key in ("progress", "variance", "progresses", "posteriors", "log_likelihoods", "fits"):
         assert np.isfinite(trace[key]).all(), key
+
+
+# ---- the emission scale learned online ---------------------------------------------------------
+
+@pytest.mark.parametrize("noise", [0.3, 1.0])
+def test_learned_sigma_scale_matches_the_performers_noise(rng, noise):
+    """EM on the emission scale: a performance that deviates from the template by Gaussian noise
+    of `noise` x sigma ends with a learned scale near `noise` (within the time-warp's
+    interpolation error and the forgetful mean's spread)."""
+    template = random_template(rng, 200, 4)
+    follower = Follower(template)
+    sigma = follower.sigma[0]
+    X, _ = time_warp(template, 1.0)
+    X = X + rng.normal(size=X.shape) * noise * sigma
+    follower.follow(X)
+    assert follower.sigma_scale == pytest.approx(noise, rel=0.35)
+    fixed = Follower(template, sigma=sigma)  # a given sigma is used as given
+    fixed.follow(X)
+    assert fixed.sigma_scale == 1.0
+    chosen = Follower(template, sigma=sigma, adapt_sigma=True)  # unless asked to adapt it
+    chosen.follow(X)
+    assert chosen.sigma_scale == pytest.approx(follower.sigma_scale, rel=1e-9)
+    with pytest.raises(TypeError, match="adapt_sigma"):
+        Follower(template, adapt_sigma="yes")

@@ -130,3 +130,22 @@ def test_record_writes_one_png_per_frame(tmp_path):
     assert count == 3 and len(files) == 3
     shares = [np.asarray(Image.open(f).convert("RGBA"))[..., 3].astype(bool).mean() for f in files]
     assert shares[0] < shares[1] < shares[2]
+
+
+def test_closing_one_scene_leaves_the_others_working():
+    first = Scene3D(size=SIZE, camera="front")
+    second = Scene3D(size=SIZE, camera="front")
+    try:
+        first.add(_Blob())
+        second.add(_Blob())
+        before = second.render()
+        first.close()
+        after = second.render()
+        np.testing.assert_array_equal(before, after)
+        third = Scene3D(size=SIZE, camera="front")
+        third.add(_Blob())
+        np.testing.assert_array_equal(third.render(), before)
+        third.close()
+    finally:
+        first.close()
+        second.close()

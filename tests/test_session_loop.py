@@ -272,3 +272,14 @@ def test_replay_mode_runs_faster_than_real_time_and_renders_every_frame():
     assert time.monotonic() - start < 4.0
     assert report.frames == 100 and report.rendered == 100 and report.dropped == 0
     assert session.performers[0].seen == {"bump"}
+
+
+def test_source_feed_follows_a_capture_source_reporting_disconnected():
+    source = ListSource(("a",))
+    source.status = "disconnected"          # capture's Status value while it reconnects
+    feed = SourceFeed(lambda: source, name="p", clock=lambda: 0.0)
+    assert feed.poll(0.0) is None and feed.status == FAILED
+    assert "disconnected" in feed.message and not source.closed   # kept: it reconnects itself
+    source.status = "ok"
+    source.queue.append(ListSource.Frame(0.1, [4.0]))
+    assert feed.poll(0.1) == pytest.approx([4.0]) and feed.status == OK

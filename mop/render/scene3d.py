@@ -21,6 +21,7 @@ vision mixer's chroma keyer), "blue" (key blue) or any (r, g, b[, a]) in 0..255.
 from __future__ import annotations
 
 import os
+import threading
 
 # pyrender picks its OpenGL platform when OpenGL is first imported: EGL works headless.
 os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
@@ -187,6 +188,13 @@ class _LeanRenderer(_PyrenderRenderer):
 
 
 class _Offscreen(pyrender.OffscreenRenderer):
+    """pyrender's offscreen renderer with the lean renderer, and a delete() that keeps the EGL
+    display alive while other scenes of the process still use it (pyrender terminates the
+    shared display, which breaks every other open context)."""
+
+    _open = 0
+    _lock = threading.Lock()
+
     def __init__(self, width, height, samples):
         self._samples = samples
         super().__init__(width, height)
@@ -196,6 +204,28 @@ class _Offscreen(pyrender.OffscreenRenderer):
         self._renderer.delete()
         self._renderer = _LeanRenderer(self.viewport_width, self.viewport_height)
         self._renderer.samples = self._samples
+        with _Offscreen._lock:
+            _Offscreen._open += 1
+
+    def delete(self):
+        platform = self._platform
+        if platform is None:
+            return
+        platform.make_current()
+        self._renderer.delete()
+        with _Offscreen._lock:
+            _Offscreen._open -= 1
+            last = _Offscreen._open == 0
+        if last or not hasattr(platform, "_egl_display"):
+            platform.delete_context()
+        else:
+            from OpenGL.EGL import EGL_NO_CONTEXT, EGL_NO_SURFACE, eglDestroyContext, eglMakeCurrent
+            eglMakeCurrent(platform._egl_display, EGL_NO_SURFACE, EGL_NO_SURFACE, EGL_NO_CONTEXT)
+            eglDestroyContext(platform._egl_display, platform._egl_context)
+            platform._egl_context = None
+            platform._egl_display = None  # so the platform's __del__ does not terminate it
+        self._renderer = None
+        self._platform = None
 
 
 class _Item:

@@ -39,7 +39,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from characters import Control, ImplicitEuler, MassSpring, ProjectiveDynamics  # noqa: E402
-from characters.latex import FROGGY, LatexPuppet  # noqa: E402
+from characters.latex import FROGGY, PD_ITERATIONS, LatexPuppet  # noqa: E402
 
 FPS = 25.0
 DT = 1.0 / FPS
@@ -108,11 +108,11 @@ def paper_sizes(frames: int) -> None:
     print("\n1. The paper's Table 1 sizes (exact masses/springs, synthetic ball), "
           "ms per 1/25 s frame, one core")
     print(f"{'masses':>7} {'springs':>8} {'paper P4':>9} {'ImplicitEuler':>27} "
-          f"{'ProjectiveDynamics':>27}")
+          f"{f'ProjectiveDynamics ({PD_ITERATIONS} it.)':>27}")
     for masses, springs, paper in PAPER:
         model = synthetic_system(masses, springs)
         ie = time_model(model, ImplicitEuler(tolerance=1e-3, max_iterations=200), frames)
-        pd = time_model(model, ProjectiveDynamics(iterations=10), frames)
+        pd = time_model(model, ProjectiveDynamics(iterations=PD_ITERATIONS), frames)
         print(f"{masses:7d} {springs:8d} {paper * 1000:7.0f} ms {stats(ie):>27} {stats(pd):>27}")
 
 
@@ -122,7 +122,8 @@ def frog_sizes(sizes, frames: int) -> dict:
     print("\n2. Froggy built at several sizes (its own tetrahedral springs): ms per frame while "
           "the glove opens and closes the mouth")
     print(f"{'asked':>6} {'masses':>7} {'springs':>8} {'tets':>6} {'build':>7} "
-          f"{'ProjectiveDynamics':>27} {'ImplicitEuler':>27} {'mouth gap':>16}")
+          f"{f'ProjectiveDynamics ({PD_ITERATIONS} it.)':>27} {'ImplicitEuler':>27} "
+          f"{'mouth gap':>16}")
     built = {}
     for masses in sizes:
         start = time.perf_counter()
@@ -130,7 +131,7 @@ def frog_sizes(sizes, frames: int) -> dict:
         build = time.perf_counter() - start
         built[masses] = puppet
         rows = []
-        for name, integrator in (("pd", ProjectiveDynamics(iterations=10)),
+        for name, integrator in (("pd", ProjectiveDynamics(iterations=PD_ITERATIONS)),
                                  ("ie", ImplicitEuler(tolerance=1e-3, max_iterations=200))):
             puppet.integrator = integrator
             puppet.reset()
@@ -144,12 +145,40 @@ def frog_sizes(sizes, frames: int) -> dict:
             rows.append(stats(times[2:]))
             if name == "pd":
                 opened = max(gaps)
-        puppet.integrator = ProjectiveDynamics(iterations=10)
+        puppet.integrator = ProjectiveDynamics(iterations=PD_ITERATIONS)
         puppet.reset()
         print(f"{masses:6d} {puppet.model.node_count:7d} {puppet.model.spring_count:8d} "
               f"{len(puppet.tetrahedra):6d} {build:6.1f}s {rows[0]:>27} {rows[1]:>27} "
               f"{closed * 1000:5.1f}->{opened * 1000:5.1f} mm")
     return built
+
+
+def accuracy(puppet: LatexPuppet, frames: int) -> None:
+    print(f"\n2b. Accuracy at {puppet.model.node_count} masses: mouth gap over the glove loop "
+          f"against implicit Euler solved tightly (CG tolerance 1e-4)")
+    runs = {}
+    for name, integrator in (("ImplicitEuler, tol 1e-4", ImplicitEuler(tolerance=1e-4,
+                                                                       max_iterations=500)),
+                             ("ImplicitEuler, tol 1e-3", ImplicitEuler(tolerance=1e-3,
+                                                                       max_iterations=200)),
+                             ("ProjectiveDynamics, 4 it.", ProjectiveDynamics(iterations=4)),
+                             ("ProjectiveDynamics, 6 it.", ProjectiveDynamics(iterations=6)),
+                             ("ProjectiveDynamics, 10 it.", ProjectiveDynamics(iterations=10))):
+        puppet.integrator = integrator
+        puppet.reset()
+        times, gaps = [], []
+        for frame in range(frames):
+            t0 = time.perf_counter()
+            puppet.step(DT, glove(frame))
+            times.append(time.perf_counter() - t0)
+            gaps.append(puppet.mouth_gap())
+        runs[name] = np.array(gaps)
+        reference = runs["ImplicitEuler, tol 1e-4"]
+        rms = np.sqrt(np.mean((runs[name] - reference) ** 2)) * 1000
+        print(f"  {name:28s} {stats(times[2:])}  max gap {runs[name].max() * 1000:6.1f} mm, "
+              f"rms vs reference {rms:5.2f} mm")
+    puppet.integrator = ProjectiveDynamics(iterations=PD_ITERATIONS)
+    puppet.reset()
 
 
 # --- 3. rendering ------------------------------------------------------------------------------
@@ -285,7 +314,7 @@ def decimation(quick: bool) -> None:
               f"{q.hausdorff_relative:7.2%} {seconds:6.2f}s")
 
 
-# --- pictures ---------------------------------------------------------------------------------------
+# --- pictures ----------------------------------------------------------------------------------
 
 def pictures(out: Path) -> None:
     from PIL import Image, ImageDraw
@@ -373,6 +402,8 @@ def main() -> None:
         if args.only == "render":
             sizes = (3700,)
         built = frog_sizes(sizes, frames)
+    if args.only is None:
+        accuracy(built[10000] if 10000 in built else built[3700], 100 if not args.quick else 40)
     if args.only in (None, "render"):
         rendering(built[3700], frames)
     if args.only in (None, "decimate"):

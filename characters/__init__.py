@@ -16,6 +16,7 @@ _EXPORTS = {
     "ProjectiveDynamics": "characters.integrators",
     "StepReport": "characters.integrators",
     "Integrator": "characters.integrators",
+    "default_integrator": "characters.integrators",
     # constraints and materials
     "CircumsphereConstraint": "characters.constraints",
     "SpringReductionConstraint": "characters.constraints",

@@ -228,6 +228,9 @@ def implicit_assemble(x, v, springs, rest, k, c, h, blocks, diag, f, kv):
 def block_matvec(springs, blocks, diag, z, out):
     """out = A z for A with diagonal blocks diag (N, d, d), off-diagonal -blocks[s] at (i, j)."""
     n, d = z.shape
+    if d == 3:
+        _block_matvec_3d(springs, blocks, diag, z, out)
+        return
     for i in range(n):
         for a in range(d):
             acc = 0.0
@@ -245,6 +248,60 @@ def block_matvec(springs, blocks, diag, z, out):
                 acc_j += blocks[s, a, b] * z[i, b]
             out[i, a] -= acc_i
             out[j, a] -= acc_j
+
+
+@njit(**_JIT)
+def _block_matvec_3d(springs, blocks, diag, z, out):
+    for i in range(z.shape[0]):
+        z0 = z[i, 0]
+        z1 = z[i, 1]
+        z2 = z[i, 2]
+        out[i, 0] = diag[i, 0, 0] * z0 + diag[i, 0, 1] * z1 + diag[i, 0, 2] * z2
+        out[i, 1] = diag[i, 1, 0] * z0 + diag[i, 1, 1] * z1 + diag[i, 1, 2] * z2
+        out[i, 2] = diag[i, 2, 0] * z0 + diag[i, 2, 1] * z1 + diag[i, 2, 2] * z2
+    for s in range(springs.shape[0]):
+        i = springs[s, 0]
+        j = springs[s, 1]
+        # spring blocks are symmetric: read the upper triangle only
+        b00 = blocks[s, 0, 0]
+        b01 = blocks[s, 0, 1]
+        b02 = blocks[s, 0, 2]
+        b11 = blocks[s, 1, 1]
+        b12 = blocks[s, 1, 2]
+        b22 = blocks[s, 2, 2]
+        zi0 = z[i, 0]
+        zi1 = z[i, 1]
+        zi2 = z[i, 2]
+        zj0 = z[j, 0]
+        zj1 = z[j, 1]
+        zj2 = z[j, 2]
+        out[i, 0] -= b00 * zj0 + b01 * zj1 + b02 * zj2
+        out[i, 1] -= b01 * zj0 + b11 * zj1 + b12 * zj2
+        out[i, 2] -= b02 * zj0 + b12 * zj1 + b22 * zj2
+        out[j, 0] -= b00 * zi0 + b01 * zi1 + b02 * zi2
+        out[j, 1] -= b01 * zi0 + b11 * zi1 + b12 * zi2
+        out[j, 2] -= b02 * zi0 + b12 * zi1 + b22 * zi2
+
+
+@njit(**_JIT)
+def cg_step(solution, residual, direction, product, alpha):
+    """solution += alpha direction; residual -= alpha product (in place)."""
+    fs = solution.ravel()
+    fr = residual.ravel()
+    fd = direction.ravel()
+    fp = product.ravel()
+    for t in range(fs.shape[0]):
+        fs[t] += alpha * fd[t]
+        fr[t] -= alpha * fp[t]
+
+
+@njit(**_JIT)
+def cg_direction(direction, preconditioned, beta):
+    """direction = preconditioned + beta direction (in place)."""
+    fd = direction.ravel()
+    fz = preconditioned.ravel()
+    for t in range(fd.shape[0]):
+        fd[t] = fz[t] + beta * fd[t]
 
 
 @njit(**_JIT)
@@ -447,6 +504,44 @@ def pd_local_rhs(x, springs, weight, base, known_index, known, out):
                 pa = scale * (x[j, a] - x[i, a])
                 out[j, a] += pa
                 out[i, a] -= pa
+    for t in range(known_index.shape[0]):
+        i = known_index[t]
+        for a in range(d):
+            out[i, a] = known[i, a]
+
+
+@njit(**_JIT)
+def pd_local_rhs_damped(x, x_start, springs, weight, damping, h, base, known_index, known, out):
+    """pd_local_rhs plus the correction that makes spring damping act along springs only.
+
+    The global matrix damps relative velocity isotropically (h C_L, constant, so it can be
+    prefactored); here the transverse part of that, h c (I - u u^T) (w_j - w_i) with
+    w = x - x_start = h v, is handed back on the right-hand side at the current iterate, so
+    the fixed point damps only along each spring (rigid rotation is not braked).
+    """
+    d = x.shape[1]
+    pd_local_rhs(x, springs, weight, base, known_index, known, out)
+    for s in range(springs.shape[0]):
+        c = damping[s]
+        if c == 0.0:
+            continue
+        i = springs[s, 0]
+        j = springs[s, 1]
+        length2 = 0.0
+        along = 0.0
+        for a in range(d):
+            e = x[j, a] - x[i, a]
+            length2 += e * e
+            along += e * ((x[j, a] - x_start[j, a]) - (x[i, a] - x_start[i, a]))
+        if length2 == 0.0:
+            continue
+        along /= length2
+        hc = h * c
+        for a in range(d):
+            w = (x[j, a] - x_start[j, a]) - (x[i, a] - x_start[i, a])
+            corr = hc * (w - along * (x[j, a] - x[i, a]))
+            out[j, a] += corr
+            out[i, a] -= corr
     for t in range(known_index.shape[0]):
         i = known_index[t]
         for a in range(d):

@@ -32,10 +32,10 @@ from .integrators import ImplicitEuler, Integrator, ProjectiveDynamics, Verlet
 from .latex_build import connection as _connection
 from .latex_build.decimate import Decimation, decimate, roundness, target_edge_length
 from .latex_build.layers import LAYER_NAMES, Layers, build_layers, tetrahedron_volumes
-from .latex_build.regions import (FINGERS, Opening, auto_regions, default_opening, parse_regions,
+from .latex_build.regions import (Opening, auto_regions, default_opening, parse_regions,
                                   resolve_regions, spread_subset)
 from .latex_build.surface import (CleanSurface, InsideTest, SurfaceDistance, clean_surface,
-                                  load_mesh)
+                                  load_mesh, signed_volume)
 from .materials import Material, material
 from .model import MassSpring
 
@@ -47,6 +47,10 @@ FROGGY = DATA / "froggy.ply"
 #: default material preset of each layer (latex skin, foam, hand cavity), characters/materials.toml
 DEFAULT_MATERIALS = ("latex_skin", "latex_foam", "latex_cavity")
 INTEGRATORS = ("implicit_euler", "projective_dynamics", "verlet")
+#: local/global iterations of the default integrator: at 10k masses 6 iterations follow a
+#: tightly solved implicit Euler step within 4 mm rms of a 10 cm mouth opening (10: 3 mm) at
+#: 60% of the cost (benchmarks/latex_puppet.py, section 2b)
+PD_ITERATIONS = 6
 MIN_MASSES = 60
 
 # the surface keeps about this share of the masses; the two inner fronts take the rest (the
@@ -113,7 +117,7 @@ def _make_integrator(integrator, substeps: int) -> Integrator:
     if integrator == "implicit_euler":
         return ImplicitEuler(substeps=substeps, tolerance=1e-3, max_iterations=200)
     if integrator == "projective_dynamics":
-        return ProjectiveDynamics(substeps=substeps, iterations=10)
+        return ProjectiveDynamics(substeps=substeps, iterations=PD_ITERATIONS)
     if integrator == "verlet":
         return Verlet(substeps=max(substeps, 200))
     raise ValueError(f"integrator must be one of {INTEGRATORS} or an Integrator, got "
@@ -184,8 +188,8 @@ class LatexPuppet:
     def step(self, dt: float, targets: Mapping | None = None) -> None:
         """Advance by dt [s] with finger targets {finger: value}.
 
-        A value is a bend (float, 0 = rest .. 1 = fully open; clipped to [0, 1]) that moves
-        the region along its opening, or a position (3,) [m] for the region's centroid. A finger
+        A value is a bend (float or (1,), 0 = rest .. 1 = fully open; clipped to [0, 1]) that
+        moves the region along its opening, or a position (3,) [m] for the region's centroid. A finger
         absent from targets holds its region at rest (the hand stays inside the puppet)."""
         targets = {} if targets is None else targets
         if not isinstance(targets, Mapping):
@@ -203,8 +207,8 @@ class LatexPuppet:
                 rows[...] = region.rest
                 continue
             array = np.asarray(value, dtype=np.float64)
-            if array.ndim == 0:
-                bend = float(array)
+            if array.shape in ((), (1,)):  # Motion.sample gives scalar channels as (1,)
+                bend = float(array.reshape(()))
                 if not math.isfinite(bend):
                     raise ValueError(f"target {region.name!r} must be finite, got {bend}")
                 region.opening.apply(region.rest, min(max(bend, 0.0), 1.0), out=rows)
@@ -277,7 +281,7 @@ class LatexPuppet:
         finger_stiffness : target spring [N/m] per region node; None = twice the median
             stiffness the region nodes already have from their springs
         integrator : "projective_dynamics" (default: the same backward Euler step as the
-            paper's, solved by 10 local/global iterations on a prefactored matrix; measured 3-6x
+            paper's, solved by 6 local/global iterations on a prefactored matrix; measured 2-5x
             faster than "implicit_euler" for the same opening, see benchmarks/latex_puppet.py),
             "implicit_euler" (the paper's one Newton iteration, CG-solved), "verlet", or an
             Integrator; substeps : integrator substeps per step
@@ -375,7 +379,6 @@ class LatexPuppet:
 
         r = roundness(layers.points, decimation.faces)
         volume = tetrahedron_volumes(layers.points, layers.tetrahedra).sum()
-        from .latex_build.surface import signed_volume
         report = BuildReport(
             source=loaded.source, repairs=list(clean.repairs),
             visual_vertices=len(clean.vertices), visual_faces=len(clean.faces),
@@ -443,7 +446,6 @@ def _make_model(layers: Layers, layer_materials, regions, finger_stiffness, grav
     mass = np.zeros(len(points))
     skin, foam, cavity = layer_materials
     # skin membrane masses first: the damping of its springs depends on them
-    surface_count = int((layers.layer == 0).sum())
     a, b, c = (points[layers.surface_faces[:, i]] for i in range(3))
     area = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
     np.add.at(mass, layers.surface_faces.ravel(),
@@ -468,7 +470,6 @@ def _make_model(layers: Layers, layer_materials, regions, finger_stiffness, grav
     model = MassSpring(points, springs, stiffness=stiffness, damping=damping, mass=mass,
                        velocity_damping=velocity_damping,
                        gravity=None if gravity is None else np.asarray(gravity, dtype=np.float64))
-    del surface_count
     target_nodes = np.concatenate([r.nodes for r in regions])
     if finger_stiffness is None:
         incident = np.bincount(springs[:, 0], stiffness, len(points)) + np.bincount(

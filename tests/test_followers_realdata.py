@@ -109,3 +109,97 @@ def test_interval_is_calibrated_on_held_out_gestures(rng, speed):
     coverage = np.mean(np.concatenate(inside))
     assert 0.82 <= coverage <= 0.97
     assert np.mean(np.concatenate(inside_fixed)) > coverage
+
+
+# ---- real Wiimote gestures: PickupGestureWiimoteZ, shipped inside the aeon wheel ----------------
+
+def _load_wiimote(split):
+    """(list of (T_i, 1) float [g], (N,) str labels): read from the .ts file in the aeon wheel
+    without importing aeon (its import is slow); skips when aeon is not installed."""
+    import importlib.util
+    import os
+    spec = importlib.util.find_spec("aeon")
+    if spec is None:
+        pytest.skip("aeon is not installed (pip install -e .[test])")
+    path = os.path.join(spec.submodule_search_locations[0], "datasets", "data",
+                        "PickupGestureWiimoteZ", f"PickupGestureWiimoteZ_{split}.ts")
+    series, labels = [], []
+    data = False
+    with open(path, encoding="utf-8") as handle:
+        for line in handle:
+            line = line.strip()
+            if not line or line.startswith("#"):
+                continue
+            if line.lower().startswith("@data"):
+                data = True
+            elif data:
+                values, label = line.rsplit(":", 1)
+                series.append(np.array([float(v) for v in values.split(",")])[:, None])
+                labels.append(label)
+    return series, np.array(labels)
+
+
+@pytest.fixture(scope="module")
+def wiimote():
+    X, y = _load_wiimote("TRAIN")
+    Xt, yt = _load_wiimote("TEST")
+    return X, y, Xt, yt
+
+
+def test_wiimote_data_is_what_the_benchmark_expects(wiimote):
+    X, y, Xt, yt = wiimote
+    assert len(X) == 50 and len(Xt) == 50
+    assert sorted(set(y), key=int) == [str(k) for k in range(1, 11)]
+    assert all(np.sum(y == c) == 5 for c in set(y))
+    lengths = [len(x) for x in X + Xt]
+    assert min(lengths) < 40 and max(lengths) > 300  # variable length, as recorded
+    assert all(np.isfinite(x).all() for x in X + Xt)
+
+
+def _wiimote_bank(X, y, classes, draw, **options):
+    demos = [X[np.nonzero(y == c)[0][draw]] for c in classes]
+    normed, normaliser = normalise(demos)
+    return FollowerBank(dict(zip(classes, normed)), **options), normaliser
+
+
+def test_wiimote_gestures_recognised_from_one_template_each(wiimote):
+    """One demonstration per gesture (train split); the 50 test gestures (other performers, as
+    recorded) are recognised by the bank's log-likelihood since reset well above chance (10 %):
+    measured 46 % and 36 % for these two draws. The bank's ``action`` (recent evidence) does
+    worse here, 22 % at the gesture's end (see docs/readme/followers.md)."""
+    X, y, Xt, yt = wiimote
+    classes = sorted(set(y), key=int)
+    correct = []
+    for draw in (0, 1):
+        bank, normaliser = _wiimote_bank(X, y, classes, draw, reject_margin=-np.inf)
+        for x, label in zip(Xt, yt):
+            total = bank.follow(normaliser(x))["log_likelihoods"][-1]
+            correct.append(classes[int(np.argmax(total))] == label)
+    assert np.mean(correct) >= 0.3
+
+
+def _auroc(positive, negative):
+    p = np.asarray(positive)[:, None]
+    n = np.asarray(negative)[None, :]
+    return float((p > n).mean() + 0.5 * (p == n).mean())
+
+
+@pytest.mark.xfail(strict=True, reason="issue 2 target not met yet: rejection AUROC on the "
+                   "Wiimote gestures is about 0.5 (benchmarks/followers.py --only wiimote)")
+def test_unrecorded_wiimote_gesture_rejected_with_auroc_0_9(wiimote):
+    """The issue's target: a gesture left out of the bank scores below the known gestures
+    (AUROC >= 0.9). Strict xfail: this test starts failing, as a reminder to flip it, once the
+    target is met."""
+    X, y, Xt, yt = wiimote
+    classes = sorted(set(y), key=int)
+    aucs = []
+    for held in ("1", "6", "10"):
+        known = [c for c in classes if c != held]
+        bank, normaliser = _wiimote_bank(X, y, known, 0)
+        positive, negative = [], []
+        for x, label in zip(Xt, yt):
+            trace = bank.follow(normaliser(x))
+            score = (trace["fits"] - bank.thresholds).max(axis=1)[10:].mean()
+            (negative if label == held else positive).append(score)
+        aucs.append(_auroc(positive, negative))
+    assert np.mean(aucs) >= 0.9

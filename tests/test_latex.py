@@ -10,6 +10,7 @@ import pytest
 trimesh = pytest.importorskip("trimesh")
 
 from characters import ImplicitEuler, LatexPuppet, ProjectiveDynamics  # noqa: E402
+from characters.latex import PD_ITERATIONS  # noqa: E402
 from characters.latex_build.layers import tetrahedron_volumes  # noqa: E402
 from characters.latex_build.surface import InsideTest, SurfaceDistance, signed_volume  # noqa: E402
 
@@ -57,7 +58,8 @@ def test_three_layers_with_every_node_inside(puppet, rng):
     x = puppet.model.rest_positions
     visual = trimesh.Trimesh(puppet.rest_vertices, puppet.faces, process=False)
     # skin nodes are visual vertices, on the surface; the foam and cavity nodes are inside
-    np.testing.assert_array_equal(x[puppet.layer == 0], puppet.rest_vertices[puppet.surface_visual_index])
+    np.testing.assert_array_equal(x[puppet.layer == 0],
+                                  puppet.rest_vertices[puppet.surface_visual_index])
     inner = x[puppet.layer > 0]
     assert np.all(InsideTest(puppet.rest_vertices, puppet.faces)(inner))
     # and by trimesh's ray test (slow on the frog's 40k faces: a sample of the nodes there)
@@ -101,7 +103,8 @@ def test_a_puppet_at_rest_stays_at_rest(puppet):
 def integrator(request, froggy):
     """The frog stepped by each integrator (the test restores the default)."""
     default = froggy.integrator
-    froggy.integrator = (ProjectiveDynamics(iterations=10) if request.param == "projective_dynamics"
+    froggy.integrator = (ProjectiveDynamics(iterations=PD_ITERATIONS)
+                         if request.param == "projective_dynamics"
                          else ImplicitEuler(tolerance=1e-3, max_iterations=200))
     yield request.param
     froggy.integrator = default
@@ -160,6 +163,18 @@ def test_position_targets_pull_a_region_towards_them(bunny):
     bunny.reset()
     np.testing.assert_array_equal(bunny.state.x, bunny.model.rest_positions)
     np.testing.assert_array_equal(bunny.surface(), bunny.rest_vertices)
+
+
+def test_motion_channels_drive_the_fingers(froggy):
+    from characters import Motion
+    froggy.reset()
+    motion = Motion({finger: (np.array([0.0, 1.0]), np.array([[0.0], [1.0]]))
+                     for finger in FINGERS})
+    closed = froggy.mouth_gap()
+    for frame in range(25):
+        froggy.step(DT, motion.sample(frame * DT))  # {finger: (1,) bend}
+    assert froggy.mouth_gap() > closed + 0.03
+    froggy.reset()
 
 
 def test_target_names_are_the_five_fingers_and_unknown_names_fail(froggy):

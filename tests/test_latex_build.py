@@ -11,11 +11,12 @@ import pytest
 trimesh = pytest.importorskip("trimesh")
 
 from characters.latex_build import decimate as dec  # noqa: E402
-from characters.latex_build.connection import build_connection, edge_graph, nearest_sources  # noqa: E402
+from characters.latex_build.connection import (build_connection, edge_graph,  # noqa: E402
+                                               nearest_sources)
 from characters.latex_build.layers import build_layers, tetrahedron_volumes  # noqa: E402
 from characters.latex_build.regions import Opening, parse_regions  # noqa: E402
-from characters.latex_build.surface import (InsideTest, SurfaceDistance, clean_surface,  # noqa: E402
-                                            edge_use_counts, load_mesh)
+from characters.latex_build.surface import (InsideTest, SurfaceDistance,  # noqa: E402
+                                            clean_surface, edge_use_counts, load_mesh)
 
 
 def _pybullet_mesh(name):
@@ -95,7 +96,7 @@ def test_inward_wound_surface_is_turned_outward():
     assert trimesh.Trimesh(clean.vertices, clean.faces, process=False).volume > 0
 
 
-# --- decimation (4.1) ------------------------------------------------------------------------------
+# --- decimation (4.1) -------------------------------------------------------------------------
 
 def _reference_cost(vertices, faces, v, *, lam, cos_tau, h):
     """Section 4.1 re-derived in plain Python for one vertex: {neighbour: cost} of every valid
@@ -118,8 +119,10 @@ def _reference_cost(vertices, faces, v, *, lam, cos_tau, h):
             new.append(np.where(face == v, u, face))
         normals_ok = True
         for old, face in zip([f for f in ring if u not in f], new):
-            n = np.cross(vertices[face[1]] - vertices[face[0]], vertices[face[2]] - vertices[face[0]])
-            n_old = np.cross(vertices[old[1]] - vertices[old[0]], vertices[old[2]] - vertices[old[0]])
+            a, b, c = vertices[face]
+            n = np.cross(b - a, c - a)
+            a, b, c = vertices[old]
+            n_old = np.cross(b - a, c - a)
             n = n / np.linalg.norm(n)
             if n @ normal < cos_tau or n @ n_old / np.linalg.norm(n_old) < cos_tau:
                 normals_ok = False
@@ -292,7 +295,8 @@ def test_connection_weights_sum_to_one_and_fall_with_edge_distance(bunny, rng):
     np.testing.assert_allclose(rows, np.eye(len(kept)))
     # moving every node by the same translation moves the visual mesh rigidly
     shift = np.array([0.1, -0.2, 0.3])
-    np.testing.assert_allclose(w @ np.tile(shift, (len(kept), 1)), np.tile(shift, (len(bunny.vertices), 1)))
+    np.testing.assert_allclose(w @ np.tile(shift, (len(kept), 1)),
+                               np.tile(shift, (len(bunny.vertices), 1)))
 
 
 # --- regions --------------------------------------------------------------------------------------

@@ -124,3 +124,20 @@ def test_blend():
         blend(a, b, 1.5)
     with pytest.raises(ValueError, match="'hand' has shape"):
         blend(a, {"hand": np.zeros(2)}, 0.5)
+
+
+@pytest.mark.parametrize("interpolation", ["linear", "cubic", "step"])
+def test_vectorised_sample_matches_scalar_reference(rng, interpolation):
+    channels = {}
+    for c in range(25):
+        keys = int(rng.integers(1, 9))
+        times = np.sort(rng.choice(np.linspace(0, 4, 400), keys, replace=False))
+        channels[f"ch{c}"] = (times, rng.normal(size=(keys, int(rng.integers(1, 4)))))
+    m = Motion(channels, interpolation=interpolation)
+    for t in np.r_[rng.uniform(-1, 5, 60), 0.0, m.duration, [k[0] for k, _ in channels.values()]]:
+        fast = m.sample(t)
+        slow = {name: v[0] for name, v in m.sample_many([t]).items()}
+        assert list(fast) == list(channels)
+        for name in channels:
+            np.testing.assert_allclose(fast[name], slow[name], rtol=1e-12, atol=1e-12)
+            assert fast[name].shape == (m.channel_size(name),)

@@ -130,6 +130,7 @@ from characters.model import tetrahedral_lattice  # noqa: E402
 INTEGRATORS = {
     "verlet": lambda: Verlet(),
     "implicit": lambda: ImplicitEuler(tolerance=1e-10),
+    "implicit-cholesky": lambda: ImplicitEuler(tolerance=1e-10, preconditioner="cholesky"),
     "projective": lambda: ProjectiveDynamics(iterations=30),
 }
 
@@ -155,7 +156,7 @@ def test_momentum_conserved_without_external_forces(rng, name):
     np.testing.assert_allclose(model.momentum(state), p0, atol=1e-7)
 
 
-@pytest.mark.parametrize("name", ["implicit", "projective"])
+@pytest.mark.parametrize("name", ["implicit", "implicit-cholesky", "projective"])
 def test_implicit_energy_never_increases(rng, name):
     model = random_cloud(rng, stiffness=50.0)
     state = model.state()
@@ -192,7 +193,8 @@ def reference_dv(model, state, h):
     return np.linalg.solve(A, b).reshape(n, d)
 
 
-def test_implicit_step_matches_dense_newton_step(rng):
+@pytest.mark.parametrize("preconditioner", ["jacobi", "cholesky"])
+def test_implicit_step_matches_dense_newton_step(rng, preconditioner):
     x = rng.normal(size=(12, 3))
     pairs = np.array([(i, j) for i in range(12) for j in range(i + 1, 12)])
     # every spring stretched: the definiteness clamp is inactive, so the Jacobian is exact
@@ -205,7 +207,7 @@ def test_implicit_step_matches_dense_newton_step(rng):
     v0, x0 = state.v.copy(), state.x.copy()
     h = 0.01
     dv = reference_dv(model, state, h)
-    ImplicitEuler(tolerance=1e-12).step(model, state, h)
+    ImplicitEuler(tolerance=1e-12, preconditioner=preconditioner).step(model, state, h)
     np.testing.assert_allclose(state.v - v0, dv, rtol=1e-5, atol=1e-6)
     np.testing.assert_allclose(state.x, x0 + h * state.v, rtol=1e-12, atol=1e-12)
 
@@ -258,3 +260,60 @@ def test_implicit_converges_to_reference_as_dt_shrinks(name):
     assert np.all(ratios > 1.6) and np.all(ratios < 2.2), (errors, ratios)
     assert ratios[-1] > 1.9, (errors, ratios)
     assert errors[-1] < 0.01
+
+
+def test_implicit_preconditioners_agree_with_pins_and_targets(rng):
+    x, springs, _ = tetrahedral_lattice((3, 3, 2), 0.1)
+    model = MassSpring(x, springs, stiffness=rng.uniform(50, 500, len(springs)), damping=0.3,
+                       mass=0.05, gravity=(0, 0, -9.81), velocity_damping=0.5, fixed=[0])
+    pins = np.flatnonzero(x[:, 2] == 0)[1:4]
+    control = Control(pins=(pins, x[pins] + [0.05, 0, 0.02]), targets={len(x) - 1: (0, 0, 1.0)},
+                      target_stiffness=20.0, target_damping=0.5)
+    results = []
+    for preconditioner in ("jacobi", "cholesky"):
+        state = model.state()
+        integrator = ImplicitEuler(tolerance=1e-12, preconditioner=preconditioner)
+        for _ in range(5):
+            integrator.step(model, state, 1 / 30, control)
+        results.append(state.x)
+    np.testing.assert_allclose(results[0], results[1], atol=1e-9)
+    np.testing.assert_allclose(results[0][pins], x[pins] + [0.05, 0, 0.02])
+    with pytest.raises(ValueError, match="preconditioner must be one of"):
+        ImplicitEuler(preconditioner="ilu")
+
+
+def test_default_integrator_is_projective():
+    from characters import default_integrator
+    assert isinstance(default_integrator(), ProjectiveDynamics)
+
+
+@pytest.mark.parametrize("chebyshev", [None, 0.9])
+def test_projective_converges_to_backward_euler_minimiser(rng, chebyshev):
+    """Converged local/global iterations = the minimiser of the backward-Euler objective
+    |x - y|_M^2 / (2 h^2) + E(x) (Liu et al. 2013), found here by scipy's L-BFGS."""
+    from scipy.optimize import minimize
+
+    x0, springs, _ = tetrahedral_lattice((2, 2, 1), 0.1)
+    model = MassSpring(x0, springs, stiffness=rng.uniform(20, 60, len(springs)),
+                       mass=rng.uniform(0.05, 0.1, len(x0)), gravity=(0, 0, -9.81),
+                       fixed=np.flatnonzero(x0[:, 2] == 0)[:2])
+    state = model.state()
+    state.v[:] = rng.normal(scale=0.5, size=x0.shape)
+    state.v[model.fixed] = 0
+    h = 0.05
+    free = ~model.fixed
+    y = state.x + h * state.v + h * h * model.gravity
+
+    def objective(flat):
+        x = state.x.copy()
+        x[free] = flat.reshape(-1, 3)
+        inertia = 0.5 / h ** 2 * np.sum(model.mass[free, None] * (x[free] - y[free]) ** 2)
+        grad = model.mass[free, None] * (x[free] - y[free]) / h ** 2
+        forces = model.forces(x, np.zeros_like(x)) - model.mass[:, None] * model.gravity
+        return inertia + model.spring_energy(x), (grad - forces[free]).ravel()
+
+    best = minimize(objective, y[free].ravel(), jac=True, method="L-BFGS-B",
+                    options=dict(ftol=1e-15, gtol=1e-12, maxiter=10000))
+    integrator = ProjectiveDynamics(iterations=400, chebyshev_rho=chebyshev)
+    integrator.step(model, state, h)
+    np.testing.assert_allclose(state.x[free], best.x.reshape(-1, 3), atol=1e-6)

@@ -8,7 +8,8 @@ JSON sidecar file or as a dict; each says how the region moves when its finger o
      "regions": {
         "thumb": {"vertices": [12, 13, 40], "open": {"rotate": {"origin": [0, -0.01, -0.03],
                                                                 "axis": [1, 0, 0], "degrees": 20}}},
-        "index": {"center": [0.06, 0.0, 0.08], "radius": 0.015, "open": {"translate": [0, 0.02, 0]}},
+        "index": {"center": [0.06, 0.0, 0.08], "radius": 0.015,
+                  "open": {"translate": [0, 0.02, 0]}},
         ...},
      "landmarks": {"upper_lip": [101], "lower_lip": [202]}}
 
@@ -54,9 +55,10 @@ class Opening:
         origin = np.asarray(self.origin)
         c, s = math.cos(angle), math.sin(angle)
         x, y, z = axis
-        rotation = np.array([[c + x * x * (1 - c), x * y * (1 - c) - z * s, x * z * (1 - c) + y * s],
-                             [y * x * (1 - c) + z * s, c + y * y * (1 - c), y * z * (1 - c) - x * s],
-                             [z * x * (1 - c) - y * s, z * y * (1 - c) + x * s, c + z * z * (1 - c)]])
+        t = 1 - c  # Rodrigues' rotation about the unit axis (x, y, z)
+        rotation = np.array([[c + x * x * t, x * y * t - z * s, x * z * t + y * s],
+                             [y * x * t + z * s, c + y * y * t, y * z * t - x * s],
+                             [z * x * t - y * s, z * y * t + x * s, c + z * z * t]])
         np.matmul(points - origin, rotation.T, out=out)
         out += origin
         return out
@@ -79,8 +81,8 @@ def parse_opening(value, what: str) -> Opening | None:
     if value is None:
         return None
     if not isinstance(value, Mapping) or len(value) != 1:
-        raise ValueError(f"{what}: 'open' must be {{'rotate': {{...}}}} or {{'translate': [x, y, z]}},"
-                         f" got {value!r}")
+        raise ValueError(f"{what}: 'open' must be {{'rotate': {{...}}}} or "
+                         f"{{'translate': [x, y, z]}}, got {value!r}")
     (kind, body), = value.items()
     if kind == "translate":
         return Opening("translate", offset=_vector(body, f"{what}: open.translate"))

@@ -178,7 +178,8 @@ def clean_surface(vertices: np.ndarray, faces: np.ndarray, *, colors=None,
     # 2. degenerate faces: repeated vertex or (numerically) zero area
     a, b, c = (merged_vertices[merged_faces[:, i]] for i in range(3))
     double_area = np.linalg.norm(np.cross(b - a, c - a), axis=1)
-    repeated = ((merged_faces[:, 0] == merged_faces[:, 1]) | (merged_faces[:, 1] == merged_faces[:, 2])
+    repeated = ((merged_faces[:, 0] == merged_faces[:, 1])
+                | (merged_faces[:, 1] == merged_faces[:, 2])
                 | (merged_faces[:, 2] == merged_faces[:, 0]))
     degenerate = repeated | (double_area <= (diagonal * 1e-7) ** 2)
     if degenerate.any():

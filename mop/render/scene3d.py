@@ -160,6 +160,13 @@ class _LeanRenderer(_PyrenderRenderer):
                                      GL.GL_RENDERBUFFER, self._main_cb)
         GL.glFramebufferRenderbuffer(GL.GL_DRAW_FRAMEBUFFER, GL.GL_DEPTH_ATTACHMENT,
                                      GL.GL_RENDERBUFFER, self._main_db)
+        if self.samples == 0:
+            # no multisampling: draw straight into the framebuffer that is read back (saves a
+            # full-frame blit); pyrender draws into _main_fb_ms
+            self._main_fb_ms, self._main_cb_ms, self._main_db_ms = (
+                self._main_fb, self._main_cb, self._main_db)
+            self._main_fb_dims = (width, height)
+            return
         self._main_cb_ms, self._main_db_ms = GL.glGenRenderbuffers(2)
         GL.glBindRenderbuffer(GL.GL_RENDERBUFFER, self._main_cb_ms)
         GL.glRenderbufferStorageMultisample(GL.GL_RENDERBUFFER, self.samples, GL.GL_RGBA,
@@ -175,12 +182,23 @@ class _LeanRenderer(_PyrenderRenderer):
                                      GL.GL_RENDERBUFFER, self._main_db_ms)
         self._main_fb_dims = (width, height)
 
+    def _delete_main_framebuffer(self):
+        if self.samples == 0 and self._main_fb is not None:
+            GL.glDeleteFramebuffers(1, [self._main_fb])
+            GL.glDeleteRenderbuffers(2, [self._main_cb, self._main_db])
+            self._main_fb = self._main_cb = self._main_db = None
+            self._main_fb_ms = self._main_cb_ms = self._main_db_ms = None
+            self._main_fb_dims = (None, None)
+            return
+        super()._delete_main_framebuffer()
+
     def _read_main_framebuffer(self, scene, flags):
         width, height = self._main_fb_dims
-        GL.glBindFramebuffer(GL.GL_READ_FRAMEBUFFER, self._main_fb_ms)
-        GL.glBindFramebuffer(GL.GL_DRAW_FRAMEBUFFER, self._main_fb)
-        GL.glBlitFramebuffer(0, 0, width, height, 0, 0, width, height,
-                             GL.GL_COLOR_BUFFER_BIT, GL.GL_LINEAR)
+        if self._main_fb_ms != self._main_fb:  # resolve the multisampled frame
+            GL.glBindFramebuffer(GL.GL_READ_FRAMEBUFFER, self._main_fb_ms)
+            GL.glBindFramebuffer(GL.GL_DRAW_FRAMEBUFFER, self._main_fb)
+            GL.glBlitFramebuffer(0, 0, width, height, 0, 0, width, height,
+                                 GL.GL_COLOR_BUFFER_BIT, GL.GL_LINEAR)
         GL.glBindFramebuffer(GL.GL_READ_FRAMEBUFFER, self._main_fb)
         data = GL.glReadPixels(0, 0, width, height, GL.GL_RGBA, GL.GL_UNSIGNED_BYTE)
         image = np.frombuffer(data, dtype=np.uint8).reshape(height, width, 4)

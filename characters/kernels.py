@@ -576,3 +576,4 @@ def gravity_work(x, x_ref, mass, inverse_mass, gravity):
             s += gravity[a] * (x[i, a] - x_ref[i, a])
         total -= mass[i] * s
     return total
+

@@ -13,7 +13,7 @@ import numpy as np
 
 @nb.njit(cache=True)
 def bank_decide(frame_loglik, xs, observed, n_obs, background_mean, background_weight,
-                background_log_norm, cap, decay, evidence_cap, lead_cap, fit_floor, recent, fit,
+                background_log_norm, cap, decay, fit_decay, evidence_cap, lead_cap, fit_floor, recent, fit,
                 fit_weight, posterior, thresholds, enter_margin, leave_margin, switch_posterior,
                 state, moments, main, lengths, progress, variance):
     """Update the bank's decision after one frame.
@@ -25,7 +25,9 @@ def bank_decide(frame_loglik, xs, observed, n_obs, background_mean, background_w
     background_mean, background_weight, background_log_norm (D,) float: the background model, one
         Gaussian over every frame of every template (mean, 1 / variance, -0.5 log(2 pi var));
         cap: the followers' outlier cap [squared sigmas], applied to it too
-    decay : float in (0, 1): forgetting factor per frame (exp(-1 / memory))
+    decay : float in (0, 1]: forgetting factor of ``recent`` per frame (exp(-1 / memory);
+        1 = no forgetting, the lead cap alone lets a new action take over)
+    fit_decay : float in (0, 1): forgetting factor of ``fit`` per frame
     evidence_cap, lead_cap : float > 0 [nats]: one frame can count at most ``evidence_cap``
         against a follower (relative to the frame's best), and no follower trails the leader by
         more than ``lead_cap`` in ``recent``. An action that was wrong for a long time thus
@@ -34,7 +36,7 @@ def bank_decide(frame_loglik, xs, observed, n_obs, background_mean, background_w
     fit_floor : float [nats per channel]: one frame counts at most this low in ``fit``, for
         the same reason (an action that was badly rejected recovers within a few frames)
     recent (K,) float in/out: forgetful sum of frame log-likelihoods relative to each frame's
-        best follower, bounded as above
+        best follower, bounded as above, then shifted so that the leader is at 0 (<= 0 each)
     fit (K,) float in/out: forgetful mean over frames of the per-channel log-likelihood ratio
         of each follower against the background model [nats per channel per frame]
     fit_weight (1,) float in/out: normaliser of that mean
@@ -61,7 +63,7 @@ def bank_decide(frame_loglik, xs, observed, n_obs, background_mean, background_w
                 diff = xs[d] - background_mean[d]
                 v = background_weight[d] * diff * diff
                 background += background_log_norm[d] - 0.5 * (v if v < cap else cap)
-        fit_weight[0] = decay * fit_weight[0] + 1.0
+        fit_weight[0] = fit_decay * fit_weight[0] + 1.0
         inv_w = 1.0 / fit_weight[0]
         frame_best = frame_loglik[1, 0]
         for k in range(1, K):
@@ -80,9 +82,11 @@ def bank_decide(frame_loglik, xs, observed, n_obs, background_mean, background_w
             if per_channel < fit_floor:
                 per_channel = fit_floor
             fit[k] = fit[k] + (per_channel - fit[k]) * inv_w
+        # relative to the leader: without forgetting (decay 1) the sums would drift without bound
         for k in range(K):
             if recent[k] < leader - lead_cap:
                 recent[k] = leader - lead_cap
+            recent[k] -= leader
         state[2] += 1
     best = 0
     top = recent[0]

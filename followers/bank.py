@@ -16,11 +16,24 @@ from followers.follower import PRUNE_MASS, resolve_adaptation, resolve_cap, reso
 # background model by this many nats per channel per frame, give or take the hysteresis
 DEFAULT_REJECT_MARGIN = 0.0
 REJECT_HYSTERESIS = 0.1
-DEFAULT_MEMORY = 10.0
+# the posterior's evidence is not forgotten by default: gestures that start and end in a rest
+# pose shared by every action (the Wiimote gestures) are decided by their middle, which a short
+# memory forgets by the end (Wiimote train split, templates and inputs both from it, argmax of
+# the posterior at a gesture's end, sigma 0.6 z: 31 % with 10 frames, 42 % with 50, 45-47 %
+# without forgetting). The bounded lead below (not forgetting) is what lets a switch through.
+DEFAULT_MEMORY = math.inf
 # the posterior's evidence is bounded (see _bank_kernels.bank_decide): one frame counts at most
 # EVIDENCE_CAP nats against an action, and no action trails the leader by more than LEAD_CAP
-EVIDENCE_CAP = 3.0
-LEAD_CAP = 8.0
+EVIDENCE_CAP = 6.0
+LEAD_CAP = 20.0
+# time constant of the rejection's fit [frames]
+FIT_MEMORY = 10.0
+# the bank's default emission sigma is this multiple of the follower's (default_sigma): which
+# action is performed must tolerate another performer's intensity, which following need not.
+# Wiimote train split, whole-gesture log-likelihood at the end: 37 % at 1x, 45.5 % at 1.5x,
+# 49 % at 1.8x, 50 % at 2.4x, 51.5 % at 4x; above 1.5x the synthetic switch test's new action
+# takes up to 16 frames to take over (1.5x: at most 8), so 1.5x is the compromise
+BANK_SIGMA_SCALE = 1.5
 FIT_FLOOR = -1.0
 
 
@@ -92,14 +105,19 @@ class FollowerBank:
     templates : {name: (T_k, D) float} (or a sequence of (name, template) pairs): one template per
         action, all with the same D channels [input units].
     sigma : float or (D,) float for every action, or {name: float, (D,) or (T_k, D)}, optional
-        [input units]: emission standard deviation. Default: estimated per template with the
-        base level from all templates together (``followers.defaults``), so every follower
-        measures distance the same way and their likelihoods compare fairly.
+        [input units]: emission standard deviation. Default: ``BANK_SIGMA_SCALE`` (1.5) times
+        the follower's default, estimated per template with the base level from all templates
+        together (``followers.defaults``), so every follower measures distance the same way and
+        their likelihoods compare fairly; wider than a lone follower's because another
+        performer's take of an action differs in intensity as well as timing.
     window : int, optional: window half-width p [states] for all followers. Default: per
         template, ``followers.defaults.default_window``.
     transitions : as for :class:`followers.Follower` (default ``"speed"``).
-    memory : float > 0 [frames]: time constant of the recent log-likelihood behind the posterior
-        and the rejection (default 10 frames: 0.4 s at 25 fps, 0.17 s at 60 fps).
+    memory : float > 0 or ``math.inf`` [frames]: time constant of the evidence behind the
+        posterior (default inf: nothing forgotten; a switch still goes through within a few
+        frames because no action trails the leader by more than ``LEAD_CAP`` = 20 nats and one
+        frame counts at most ``EVIDENCE_CAP`` = 6 nats). The rejection's ``fit`` has its own
+        10-frame memory (``FIT_MEMORY``).
     reject_margin : float [nats per channel per frame]: the rejection threshold. The templates
         themselves define a *background model*: one Gaussian over all their frames ("some pose
         of this performer"). A follower accepts the input while its recent log-likelihood beats
@@ -143,7 +161,7 @@ class FollowerBank:
         K = len(arrays)
         model = resolve_transitions(transitions)
         if sigma is None:
-            sigmas = [default_sigma(a, pooled=arrays) for a in arrays]
+            sigmas = [BANK_SIGMA_SCALE * default_sigma(a, pooled=arrays) for a in arrays]
         elif isinstance(sigma, Mapping):
             unknown = sorted(set(sigma) - set(names))
             if unknown or len(sigma) != K:
@@ -182,6 +200,7 @@ class FollowerBank:
         self.reject_margin = reject_margin
         self.switch_posterior = float(switch_posterior)
         self._decay = math.exp(-1.0 / memory)
+        self._fit_decay = math.exp(-1.0 / FIT_MEMORY)
         # the background model: one Gaussian over every frame of every template
         stacked = np.concatenate(arrays, axis=0)
         spread = np.maximum(stacked.std(axis=0), 1e-6 * max(1.0, float(np.abs(stacked).max())))
@@ -254,7 +273,8 @@ class FollowerBank:
 
     @property
     def recent_log_likelihoods(self) -> np.ndarray:
-        """(K,) float: forgetful sum of recent frame log-likelihoods (time constant ``memory``)."""
+        """(K,) float <= 0: sum of frame log-likelihoods relative to each frame's best follower,
+        bounded (see ``memory``), forgotten with time constant ``memory``, leader at 0."""
         return self._recent
 
     @property
@@ -288,7 +308,7 @@ class FollowerBank:
         n_obs = engine.step(frame)
         _bank_kernels.bank_decide(
             engine.frame_loglik, engine._xs, engine._observed, n_obs, self._background_mean,
-            self._background_weight, self._background_log_norm, engine.cap, self._decay,
+            self._background_weight, self._background_log_norm, engine.cap, self._decay, self._fit_decay,
             EVIDENCE_CAP, LEAD_CAP, FIT_FLOOR, self._recent, self._fit, self._fit_weight,
             self._posterior, self._thresholds,
             self._enter_margin, self._leave_margin, self.switch_posterior, self._state,

@@ -401,3 +401,17 @@ def test_learned_sigma_scale_matches_the_performers_noise(rng, noise):
     assert chosen.sigma_scale == pytest.approx(follower.sigma_scale, rel=1e-9)
     with pytest.raises(TypeError, match="adapt_sigma"):
         Follower(template, adapt_sigma="yes")
+
+
+def test_bank_evidence_stays_bounded_without_forgetting(rng, actions):
+    """The default posterior forgets nothing (memory = inf); its evidence is kept relative to
+    the leader, so it stays within the lead cap however long the performance."""
+    bank = FollowerBank(actions)
+    assert bank.memory == float("inf")
+    X = rng.normal(scale=3.0, size=(3000, 4))
+    for x in X:
+        bank.step(x)
+    recent = bank.recent_log_likelihoods
+    assert recent.max() == 0.0
+    assert recent.min() >= -20.0 - 1e-9
+    assert bank.posteriors.sum() == pytest.approx(1.0)

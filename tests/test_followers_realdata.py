@@ -164,18 +164,21 @@ def _wiimote_bank(X, y, classes, draw, **options):
 
 def test_wiimote_gestures_recognised_from_one_template_each(wiimote):
     """One demonstration per gesture (train split); the 50 test gestures (other performers, as
-    recorded) are recognised by the bank's log-likelihood since reset well above chance (10 %):
-    measured 46 % and 36 % for these two draws. The bank's ``action`` (recent evidence) does
-    worse here, 22 % at the gesture's end (see docs/readme/followers.md)."""
+    recorded) are recognised well above chance (10 %) at their end, both by the bank's
+    log-likelihood since reset (measured 54 % and 36 % for these two draws) and by
+    ``bank.action`` (38 % and 42 %; it was 22 % when the posterior forgot after 10 frames and
+    decided on the rest pose every gesture ends in)."""
     X, y, Xt, yt = wiimote
     classes = sorted(set(y), key=int)
-    correct = []
+    total_correct, action_correct = [], []
     for draw in (0, 1):
         bank, normaliser = _wiimote_bank(X, y, classes, draw, reject_margin=-np.inf)
         for x, label in zip(Xt, yt):
-            total = bank.follow(normaliser(x))["log_likelihoods"][-1]
-            correct.append(classes[int(np.argmax(total))] == label)
-    assert np.mean(correct) >= 0.3
+            trace = bank.follow(normaliser(x))
+            total_correct.append(classes[int(np.argmax(trace["log_likelihoods"][-1]))] == label)
+            action_correct.append(classes[trace["action"][-1]] == label)
+    assert np.mean(total_correct) >= 0.38
+    assert np.mean(action_correct) >= 0.32
 
 
 def _auroc(positive, negative):
@@ -185,7 +188,7 @@ def _auroc(positive, negative):
 
 
 @pytest.mark.xfail(strict=True, reason="issue 2 target not met yet: rejection AUROC on the "
-                   "Wiimote gestures is about 0.5 (benchmarks/followers.py --only wiimote)")
+                   "Wiimote gestures is about 0.53 (benchmarks/followers.py --only wiimote)")
 def test_unrecorded_wiimote_gesture_rejected_with_auroc_0_9(wiimote):
     """The issue's target: a gesture left out of the bank scores below the known gestures
     (AUROC >= 0.9). Strict xfail: this test starts failing, as a reminder to flip it, once the

@@ -285,6 +285,10 @@ def test_implicit_preconditioners_agree_with_pins_and_targets(rng):
 def test_default_integrator_is_projective():
     from characters import default_integrator
     assert isinstance(default_integrator(), ProjectiveDynamics)
+    assert default_integrator().chebyshev_rho is None
+    assert default_integrator(frame_rate=25).chebyshev_rho == 0.9
+    with pytest.raises(ValueError, match="frame_rate"):
+        default_integrator(frame_rate=0)
 
 
 @pytest.mark.parametrize("chebyshev", [None, 0.9])

@@ -441,6 +441,7 @@ class _Factorisation:
                                       matrix.indices.astype(np.int32),
                                       matrix.data.astype(np.float64), MatrixType.CSR)
         self.weight = h * h * model.stiffness * model.rest_length
+        self.damping_h = h * model.damping
         self.base = np.zeros((n, d))
         self.rhs = np.zeros((n, d))
         self.solved = np.zeros((n, d))
@@ -541,7 +542,7 @@ class ProjectiveDynamics(Integrator):
         for iteration in range(self.iterations):
             if damped:
                 kernels.pd_local_rhs_damped(x, fac.x_start, model.springs, fac.weight,
-                                            model.damping, h, fac.base, fac.known_index, known,
+                                            fac.damping_h, fac.base, fac.known_index, known,
                                             fac.rhs)
             else:
                 kernels.pd_local_rhs(x, model.springs, fac.weight, fac.base, fac.known_index,

@@ -511,19 +511,64 @@ def pd_local_rhs(x, springs, weight, base, known_index, known, out):
 
 
 @njit(**_JIT)
-def pd_local_rhs_damped(x, x_start, springs, weight, damping, h, base, known_index, known, out):
+def pd_local_rhs_damped(x, x_start, springs, weight, damping_h, base, known_index, known, out):
     """pd_local_rhs plus the correction that makes spring damping act along springs only.
 
     The global matrix damps relative velocity isotropically (h C_L, constant, so it can be
     prefactored); here the transverse part of that, h c (I - u u^T) (w_j - w_i) with
     w = x - x_start = h v, is handed back on the right-hand side at the current iterate, so
     the fixed point damps only along each spring (rigid rotation is not braked).
+    damping_h (M,) = h c_s [kg].
     """
+    d = x.shape[1]
+    if d != 3:
+        _pd_local_rhs_damped_nd(x, x_start, springs, weight, damping_h, base, known_index,
+                                known, out)
+        return
+    out[...] = base
+    for s in range(springs.shape[0]):
+        i = springs[s, 0]
+        j = springs[s, 1]
+        ex = x[j, 0] - x[i, 0]
+        ey = x[j, 1] - x[i, 1]
+        ez = x[j, 2] - x[i, 2]
+        length2 = ex * ex + ey * ey + ez * ez
+        if length2 == 0.0:
+            continue
+        inv2 = 1.0 / length2
+        scale = weight[s] * np.sqrt(inv2)
+        fx = scale * ex
+        fy = scale * ey
+        fz = scale * ez
+        hc = damping_h[s]
+        if hc != 0.0:
+            wx = (x[j, 0] - x_start[j, 0]) - (x[i, 0] - x_start[i, 0])
+            wy = (x[j, 1] - x_start[j, 1]) - (x[i, 1] - x_start[i, 1])
+            wz = (x[j, 2] - x_start[j, 2]) - (x[i, 2] - x_start[i, 2])
+            along = (ex * wx + ey * wy + ez * wz) * inv2
+            fx += hc * (wx - along * ex)
+            fy += hc * (wy - along * ey)
+            fz += hc * (wz - along * ez)
+        out[j, 0] += fx
+        out[j, 1] += fy
+        out[j, 2] += fz
+        out[i, 0] -= fx
+        out[i, 1] -= fy
+        out[i, 2] -= fz
+    for t in range(known_index.shape[0]):
+        i = known_index[t]
+        for a in range(d):
+            out[i, a] = known[i, a]
+
+
+@njit(**_JIT)
+def _pd_local_rhs_damped_nd(x, x_start, springs, weight, damping_h, base, known_index, known,
+                            out):
     d = x.shape[1]
     pd_local_rhs(x, springs, weight, base, known_index, known, out)
     for s in range(springs.shape[0]):
-        c = damping[s]
-        if c == 0.0:
+        hc = damping_h[s]
+        if hc == 0.0:
             continue
         i = springs[s, 0]
         j = springs[s, 1]
@@ -536,7 +581,6 @@ def pd_local_rhs_damped(x, x_start, springs, weight, damping, h, base, known_ind
         if length2 == 0.0:
             continue
         along /= length2
-        hc = h * c
         for a in range(d):
             w = (x[j, a] - x_start[j, a]) - (x[i, a] - x_start[i, a])
             corr = hc * (w - along * (x[j, a] - x[i, a]))

@@ -224,7 +224,7 @@ class MedialObject:
         constraints = []
         if len(dyn):
             if constraint is ConstraintMethod.CIRCUMSPHERE:
-                # radius (f_max - 1) L: see docs/readme/medial_objects.md for why not f_max L
+                # radius (f_max - 1) L: see docs/medial_objects.md for why not f_max L
                 radius = (material.max_factor - 1.0) * self.bone_rest_length[dyn]
                 constraints.append(CircumsphereConstraint(dyn, radius=radius, name="medial_sphere"))
             else:

@@ -6,7 +6,7 @@ distance ``d`` to the point places the skeletal point on the negative vertex nor
 ``s = p - d n``. Where a point has no internal Voronoi point, the skeletal point is the surface
 point itself. The skeleton therefore has one point per surface vertex and the mesh's connectivity.
 
-One addition to the paper (documented in docs/readme/medial_objects.md): a medial ball tangent at
+One addition to the paper (documented in docs/medial_objects.md): a medial ball tangent at
 ``p`` cannot reach past the midpoint of the chord that ``-n`` cuts through the solid, so ``d`` is
 clamped to half that chord. Far Voronoi points in flat or thin regions pass the local face-normal
 test and would otherwise push the skeletal point through the opposite side of the shape.

@@ -16,6 +16,7 @@ _EXPORTS = {
     "ProjectiveDynamics": "characters.integrators",
     "StepReport": "characters.integrators",
     "Integrator": "characters.integrators",
+    "StepFailure": "characters.integrators",
     "default_integrator": "characters.integrators",
     # constraints and materials
     "CircumsphereConstraint": "characters.constraints",

@@ -52,6 +52,11 @@ class StepReport:
     iterations: int = 0
 
 
+class StepFailure(RuntimeError):
+    """Raised inside an attempt that cannot be completed (e.g. a singular factorisation):
+    `Integrator.step` treats it like a blow-up, rolls back and retries."""
+
+
 class _Scratch:
     """Per-model buffers an integrator reuses across steps (no allocation per step)."""
 
@@ -162,13 +167,20 @@ class Integrator:
         substeps = self.substeps
         for attempt in range(self.max_retries + 1):
             report.substeps = substeps
-            iterations = self._run(model, state, dt, resolved, substeps, scratch)
             reason = ""
-            if not (kernels.all_finite(state.x) and kernels.all_finite(state.v)):
+            try:
+                # overflow becomes inf and is caught below, not a warning mid-step
+                with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+                    iterations = self._run(model, state, dt, resolved, substeps, scratch)
+            except StepFailure as failure:
+                reason = str(failure)
+            if reason:
+                pass
+            elif not (kernels.all_finite(state.x) and kernels.all_finite(state.v)):
                 reason = "NaN or inf in the state"
             elif self.check_energy:
                 report.energy_after = self._energy(model, state.x, state.v, scratch.x0)
-                if report.energy_after > limit:
+                if not report.energy_after <= limit:  # also catches a NaN energy
                     reason = (f"energy jumped from {report.energy_before:.3g} J to "
                               f"{report.energy_after:.3g} J (limit {limit:.3g} J)")
             if not reason:
@@ -348,6 +360,8 @@ class ImplicitEuler(Integrator):
         np.multiply(b.kv, h, out=b.rhs)
         b.rhs += b.force
         b.rhs *= h
+        if not kernels.all_finite(b.rhs):
+            raise StepFailure("implicit Euler: the linear system's right-hand side overflowed")
         b.free[...] = b.base_free
         dv = b.dv  # warm start: last step's velocity change
         dv[model.fixed] = 0.0
@@ -437,9 +451,15 @@ class _Factorisation:
         matrix = sparse.csr_matrix((vals, (rows, cols)), shape=(n, n))
         matrix.sum_duplicates()
         matrix.sort_indices()
-        self.solver = CholeskySolverD(n, matrix.indptr.astype(np.int32),
-                                      matrix.indices.astype(np.int32),
-                                      matrix.data.astype(np.float64), MatrixType.CSR)
+        if not np.all(np.isfinite(matrix.data)):
+            raise StepFailure(f"global matrix not finite at step {h:g} s")
+        try:
+            self.solver = CholeskySolverD(n, matrix.indptr.astype(np.int32),
+                                          matrix.indices.astype(np.int32),
+                                          matrix.data.astype(np.float64), MatrixType.CSR)
+        except ValueError as error:  # cholespy: "Matrix is not positive definite!"
+            raise StepFailure(f"Cholesky factorisation failed at step {h:g} s ({error})") \
+                from None
         self.weight = h * h * model.stiffness * model.rest_length
         self.damping_h = h * model.damping
         self.base = np.zeros((n, d))
@@ -479,14 +499,15 @@ class ProjectiveDynamics(Integrator):
 
     iterations: local/global iterations per step. chebyshev_rho: spectral-radius estimate for
     Chebyshev acceleration (Wang 2015), None to disable; it starts after `chebyshev_start`
-    plain iterations. Spring damping enters the prefactored matrix isotropically (a Laplacian
+    plain iterations. The defaults (8 iterations, rho 0.9) are the measured best, see
+    `default_integrator`. Spring damping enters the prefactored matrix isotropically (a Laplacian
     damper on relative velocity, which would also brake rigid rotation); the local step hands
     the transverse part back at the current iterate, so converged iterations damp along the
     springs only, as ImplicitEuler and Verlet do.
     """
 
-    def __init__(self, *, substeps: int = 1, iterations: int = 10,
-                 chebyshev_rho: float | None = None, chebyshev_start: int = 2,
+    def __init__(self, *, substeps: int = 1, iterations: int = 8,
+                 chebyshev_rho: float | None = 0.9, chebyshev_start: int = 2,
                  chebyshev_gamma: float = 1.0, **kwargs):
         super().__init__(substeps=substeps, **kwargs)
         if iterations < 1:
@@ -564,22 +585,16 @@ class ProjectiveDynamics(Integrator):
         return self.iterations
 
 
-def default_integrator(frame_rate: float | None = None) -> Integrator:
+def default_integrator() -> Integrator:
     """The integrator puppets should use unless they have a reason not to.
 
-    ProjectiveDynamics, 10 iterations: measured in benchmarks/sim.py on stiff-rubber heads it is
-    the only integrator near a 60 fps budget at 10k masses / 45k springs (one prefactored solve
-    per iteration), stable at any step size and within the accuracy target (RMS ~1 mm from the
-    converged reference at 1/60 s); one Newton step with PCG is 5-10x slower, explicit Verlet
-    needs hundreds of substeps per frame on stiff material.
-
-    frame_rate [1/s]: at 30 fps and below (e.g. the latex puppets' 25 fps), Chebyshev
-    acceleration (rho 0.9) is switched on: there it cut the RMS deviation of the 10k head from
-    4.7 mm to 0.85 mm at the same cost, while at 60 fps it made it worse (1.0 -> 2.0 mm).
+    ProjectiveDynamics with its defaults: 8 local/global iterations, Chebyshev acceleration
+    (rho 0.9). Measured in benchmarks/sim.py on stiff-rubber heads shaken by the hand: the only
+    integrator within a 60 fps budget at 10k masses / 45k springs (one prefactored solve per
+    iteration; ~8.5 ms per 1/60 s step on a quiet core), stable at any step size, and 1.0-1.5 mm
+    RMS from the converged reference at both 1/60 s and 1/25 s. Without Chebyshev, 8-10
+    iterations were as good at 1/60 s on the 10k head but 4.5-4.8 mm off at 1/25 s and 2.3-2.6 mm
+    at 1/60 s on a coarser head; one Newton step with PCG is 4-8x slower, explicit Verlet needs
+    hundreds of substeps per frame on stiff material.
     """
-    if frame_rate is not None and not (frame_rate > 0 and math.isfinite(frame_rate)):
-        raise ValueError(f"frame_rate must be a positive number of frames per second, got "
-                         f"{frame_rate!r}")
-    if frame_rate is not None and frame_rate <= 30:
-        return ProjectiveDynamics(iterations=10, chebyshev_rho=0.9)
-    return ProjectiveDynamics(iterations=10)
+    return ProjectiveDynamics()

@@ -11,6 +11,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+# fastmath: reassociation and FMA for the force sums; kernels that must see NaN/inf
+# (all_finite) are compiled without it
 _JIT = dict(cache=True, nogil=True, fastmath=True, error_model="numpy")
 
 
@@ -146,7 +148,7 @@ def symplectic_update(x, v, f, inverse_mass, dt, retention):
             x[i, a] += dt * vi
 
 
-@njit(**_JIT)
+@njit(cache=True, nogil=True)  # no fastmath here: it would assume away NaN and inf
 def all_finite(a):
     flat = a.ravel()
     for i in range(flat.shape[0]):

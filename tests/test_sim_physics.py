@@ -131,7 +131,8 @@ INTEGRATORS = {
     "verlet": lambda: Verlet(),
     "implicit": lambda: ImplicitEuler(tolerance=1e-10),
     "implicit-cholesky": lambda: ImplicitEuler(tolerance=1e-10, preconditioner="cholesky"),
-    "projective": lambda: ProjectiveDynamics(iterations=30),
+    "projective": lambda: ProjectiveDynamics(iterations=30, chebyshev_rho=None),
+    "projective-default": lambda: ProjectiveDynamics(),
 }
 
 
@@ -284,11 +285,11 @@ def test_implicit_preconditioners_agree_with_pins_and_targets(rng):
 
 def test_default_integrator_is_projective():
     from characters import default_integrator
-    assert isinstance(default_integrator(), ProjectiveDynamics)
-    assert default_integrator().chebyshev_rho is None
-    assert default_integrator(frame_rate=25).chebyshev_rho == 0.9
-    with pytest.raises(ValueError, match="frame_rate"):
-        default_integrator(frame_rate=0)
+    integrator = default_integrator()
+    assert isinstance(integrator, ProjectiveDynamics)
+    assert integrator.iterations == 8 and integrator.chebyshev_rho == 0.9
+    with pytest.raises(ValueError, match="chebyshev_rho"):
+        ProjectiveDynamics(chebyshev_rho=1.5)
 
 
 @pytest.mark.parametrize("chebyshev", [None, 0.9])

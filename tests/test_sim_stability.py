@@ -188,3 +188,25 @@ def test_step_validation(name):
         integrator.step("model", model.state(), 0.01)
     with pytest.raises(ValueError, match="substeps"):
         INTEGRATORS[name](substeps=0)
+
+
+@pytest.mark.parametrize("name", list(INTEGRATORS))
+def test_non_finite_step_is_rolled_back_even_without_energy_check(name):
+    model = MassSpring([[0.0, 0, 0], [1, 0, 0]], [[0, 1]], stiffness=10.0)
+    state = model.state()
+    # a finite but absurd force overflows the positions to inf within the step
+    control = Control(forces={1: (1e308, 1e308, 0)})
+    report = INTEGRATORS[name](check_energy=False, max_retries=1).step(model, state, 1e10,
+                                                                       control)
+    assert not report.ok and report.rolled_back
+    # (at this step size the projective matrix cannot even be factorised: also a failure)
+    assert any(word in report.reason for word in ("NaN or inf", "factorisation", "overflow"))
+    assert np.all(np.isfinite(state.x)) and np.all(np.isfinite(state.v))
+    np.testing.assert_array_equal(state.x, model.rest_positions)
+
+
+def test_all_finite_kernel_sees_nan_and_inf():
+    from characters import kernels
+    assert not kernels.all_finite(np.array([[np.nan, 1.0]]))
+    assert not kernels.all_finite(np.array([[1.0, -np.inf]]))
+    assert kernels.all_finite(np.zeros((3, 2)))

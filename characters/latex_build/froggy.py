@@ -192,5 +192,5 @@ def write(directory: Path = DATA, *, edge_length: float = 0.0065) -> tuple[Path,
 
 
 if __name__ == "__main__":  # pragma: no cover - asset generation
-    for path in write():
-        print(path)
+    import sys
+    sys.stdout.write("".join(f"{path}\n" for path in write()))

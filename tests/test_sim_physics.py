@@ -3,8 +3,10 @@ import math
 
 import numpy as np
 import pytest
+from scipy.integrate import solve_ivp
 
-from characters import Control, MassSpring, Verlet
+from characters import Control, ImplicitEuler, MassSpring, ProjectiveDynamics, Verlet
+from characters.model import tetrahedral_lattice
 
 
 def two_masses(k=50.0, m=0.2, stretch=0.05, dim=3):
@@ -122,10 +124,6 @@ def test_target_force_pulls_towards_target():
 
 # --- all integrators --------------------------------------------------------------------------
 
-from scipy.integrate import solve_ivp  # noqa: E402
-
-from characters import ImplicitEuler, ProjectiveDynamics, material  # noqa: E402
-from characters.model import tetrahedral_lattice  # noqa: E402
 
 INTEGRATORS = {
     "verlet": lambda: Verlet(),
@@ -330,7 +328,7 @@ def test_spring_damping_does_not_brake_rigid_rotation(name):
     as fast as without it (an isotropic damper on relative velocity would stop it).
 
     (ImplicitEuler is left out: its single linearised Newton step itself bleeds about half of
-    this block's rotational energy in 30 steps, damping or not; see docs/readme/core.md.)"""
+    this block's rotational energy in 30 steps, damping or not; see docs/core.md.)"""
     x, springs, _ = tetrahedral_lattice((2, 2, 2), 0.05)
     x = x - x.mean(0)
     energies = []

@@ -38,7 +38,7 @@ class VideoOutput:
             self.writer = None
 
 
-class PngOutput:
+class PngOutput(VideoOutput):
     """A folder of frame_000000.png ... with alpha (RGBA), through `mop.export.open_writer`.
     Dropped (repeated) frames are not written again."""
 
@@ -49,15 +49,8 @@ class PngOutput:
         self.frames = 0
 
     def write(self, frame, state, *, repeat: bool = False) -> None:
-        if frame is None or repeat:
-            return
-        self.writer.write(frame)
-        self.frames += 1
-
-    def close(self) -> None:
-        if self.writer is not None:
-            self.writer.close()
-            self.writer = None
+        if not repeat:
+            super().write(frame, state)
 
 
 class OscOutput:

@@ -49,16 +49,11 @@ def test_two_performers_three_characters_replayed_twice_give_identical_frames(tm
     # what the followers said, every target, every puppet's geometry: bit for bit the same
     assert log_a.states == log_b.states
     assert log_a.surfaces == log_b.surfaces
-    # the pictures: the 2D renderer and the compositing are exact; Mesa's software rasteriser
-    # (llvmpipe, behind pyrender) is not quite: about one frame in fifty may have one pixel one
-    # level off in a 3D character, so that much is allowed and no more
+    # the pictures, 2D and 3D layers composed: byte for byte (pyrender's light and mesh order is
+    # pinned by mop.render.scene3d, otherwise a stray pixel may round one level differently)
     differing = [k for k, (a, b) in enumerate(zip(log_a.frames, log_b.frames))
                  if not np.array_equal(a, b)]
-    assert len(differing) <= 3, differing
-    for k in differing:
-        delta = np.abs(log_a.frames[k].astype(int) - log_b.frames[k]).max(axis=-1)
-        assert delta.max() <= 1 and np.count_nonzero(delta) <= 4
-        assert not delta[:, :int(0.55 * delta.shape[1])].any()   # never in the 2D cut-out
+    assert differing == []
     # ... and the frames are not trivially equal: the characters moved
     digests = {hashlib.sha1(frame.tobytes()).hexdigest() for frame in log_a.frames}
     assert len(digests) > 90

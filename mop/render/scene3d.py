@@ -45,6 +45,36 @@ except ImportError as _error:  # pragma: no cover - depends on the environment
 _JIT = dict(cache=True, nogil=True, error_model="numpy")
 
 
+class _OrderedScene(pyrender.Scene):
+    """A pyrender scene that hands meshes and lights to the renderer in the order they were
+    added. pyrender keeps them in sets, whose order follows object ids and so changes from run to
+    run; the shader then sums the lights in another order and a few pixels round one level
+    differently, which breaks byte-identical replays."""
+
+    def __init__(self, **kwargs):
+        self._added = {}
+        super().__init__(**kwargs)
+
+    def add_node(self, node, parent_node=None):
+        self._added.setdefault(node, len(self._added))
+        super().add_node(node, parent_node=parent_node)
+
+    def remove_node(self, node):
+        super().remove_node(node)
+        self._added.pop(node, None)
+
+    def _ordered(self, nodes):
+        return sorted(nodes, key=lambda n: self._added.get(n, -1))
+
+    @property
+    def mesh_nodes(self):
+        return self._ordered(super().mesh_nodes)
+
+    @property
+    def light_nodes(self):
+        return self._ordered(super().light_nodes)
+
+
 @dataclass(frozen=True)
 class Look:
     """A surface material: base colour (r, g, b) in 0..1, roughness, metallic, and whether
@@ -346,7 +376,7 @@ class Scene3D:
         self._camera_choice = camera
         self._lights = lights
         self._yfov = float(yfov)
-        self._scene = pyrender.Scene(bg_color=self.background, ambient_light=(0.28, 0.28, 0.3))
+        self._scene = _OrderedScene(bg_color=self.background, ambient_light=(0.28, 0.28, 0.3))
         self._items: list[_Item] = []
         self._camera_node = None
         self._light_nodes = []

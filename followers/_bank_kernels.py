@@ -14,7 +14,7 @@ import numpy as np
 @nb.njit(cache=True)
 def bank_decide(frame_loglik, xs, observed, n_obs, background_mean, background_weight,
                 background_log_norm, cap, decay, fit_decay, evidence_cap, lead_cap, fit_floor, recent, fit,
-                fit_weight, posterior, thresholds, enter_margin, leave_margin, switch_posterior,
+                fit_weight, posterior, thresholds, enter_margin, leave_margin, switch_margin,
                 state, moments, main, lengths, progress, variance):
     """Update the bank's decision after one frame.
 
@@ -45,7 +45,8 @@ def bank_decide(frame_loglik, xs, observed, n_obs, background_mean, background_w
     enter_margin, leave_margin : float >= 0: hysteresis on the rejection (to become active an
         action needs fit >= threshold + enter_margin; it stays active while
         fit >= threshold - leave_margin)
-    switch_posterior : float in (0.5, 1]: posterior another action needs to take over
+    switch_margin : float >= 0 [nats]: how far another action's ``recent`` must exceed the
+        active one's for it to take over
     moments (K, 2, 3), main (K,), lengths (K,): the engine's tracks (see ``_kernels``)
     progress, variance (K,) float out: each follower's main-track progress [0, 1] and variance
     """
@@ -109,7 +110,7 @@ def bank_decide(frame_loglik, xs, observed, n_obs, background_mean, background_w
     if active >= 0:
         if fit[active] < thresholds[active] - leave_margin:
             new = -1
-        if best != active and posterior[best] >= switch_posterior and \
+        if best != active and recent[best] - recent[active] >= switch_margin and \
                 fit[best] >= thresholds[best] + enter_margin:
             new = best
     elif fit[best] >= thresholds[best] + enter_margin:

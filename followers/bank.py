@@ -23,17 +23,45 @@ REJECT_HYSTERESIS = 0.1
 # without forgetting). The bounded lead below (not forgetting) is what lets a switch through.
 DEFAULT_MEMORY = math.inf
 # the posterior's evidence is bounded (see _bank_kernels.bank_decide): one frame counts at most
-# EVIDENCE_CAP nats against an action, and no action trails the leader by more than LEAD_CAP
+# EVIDENCE_CAP nats against an action, and no action trails the leader by more than LEAD_CAP.
+# A larger lead cap remembers more of a gesture's middle (Wiimote train split, 15 random draws
+# of one template per gesture, the other 40 train gestures as input, 600 decisions,
+# bank.action after 25/50/100 %, rejection off, sigma 2.5x / 1.5x not floored, evidence cap
+# 15: lead cap 20: 45/44/44 %, 40: 45/46/47 %, 60: 45/46/49 %; the evidence cap changes
+# little) but slows a switch: the synthetic switch test's new action took up to 14 frames at
+# 20 and 18 at 30 over 21 seeds (7 at the tests' default seed), against the issue's "a
+# fraction of a second", so 20 stays
 EVIDENCE_CAP = 6.0
 LEAD_CAP = 20.0
+# hysteresis: another action takes over when its evidence beats the active one's by this many
+# nats (posterior ratio e**2 = 7.4). A posterior threshold (0.9) is rarely reached among ten
+# similar gestures, so the first, often arbitrary choice stuck (same protocol as below, rejection
+# off, following / recognition sigma 2.5x / 1.5x not floored: posterior 0.9: 37/43/44 %, 0.5: 43/44/44 %; margin 1 nat:
+# 45/45/44 %, 2 nats: 45/44/44 %, 3 nats: 44/44/44 %: flat, 2 taken as the middle)
+DEFAULT_SWITCH_MARGIN = 2.0
 # time constant of the rejection's fit [frames]
 FIT_MEMORY = 10.0
-# the bank's default emission sigma is this multiple of the follower's (default_sigma): which
-# action is performed must tolerate another performer's intensity, which following need not.
-# Wiimote train split, whole-gesture log-likelihood at the end: 37 % at 1x, 45.5 % at 1.5x,
-# 49 % at 1.8x, 50 % at 2.4x, 51.5 % at 4x; above 1.5x the synthetic switch test's new action
-# takes up to 16 frames to take over (1.5x: at most 8), so 1.5x is the compromise
-BANK_SIGMA_SCALE = 1.5
+# the bank's default emission sigmas are multiples of the follower's (default_sigma): the
+# forward recursion (alignment, progress) uses BANK_SIGMA_SCALE, the recognition score (the
+# posterior over actions and the rejection's fit) RECOGNITION_SIGMA_SCALE, floored at half each
+# template's own channel spread (defaults.recognition_sigma), from the same predicted states.
+# Which action is performed must tolerate another performer's intensity, which following need
+# not; a wide following sigma keeps the alignment from locking onto a wrong stretch of the
+# template. Chosen on the train splits only (templates and inputs both from them):
+#   following / recognition      Wiimote bank.action,  BasicMotions bank.action
+#                                rejection off         (off: rejection off)
+#   1.5 / 1.5 floored (before)    39 / 40 / 39 %        59 / 66 / 68 % (off 84 / 88 / 89 %)
+#   2.5 / 1.5 floored (adopted)   43 / 43 / 43 %        68 / 72 / 76 % (off 88 / 93 / 96 %)
+#   2.5 / 1.5 not floored         45 / 44 / 44 %        49 / 57 / 59 % (off 74 / 81 / 82 %)
+#   2.5 / 2.5 floored             43 / 43 / 45 %        66 / 71 / 75 % (off 79 / 88 / 91 %)
+# (after 25 / 50 / 100 %; Wiimote: 15 random draws of one template per gesture, the other 40
+# train gestures as input; BasicMotions: 6 draws, the other 36 train recordings at 1x and 2x).
+# The bank's progress on time-warped GunPoint (median error at 0.5/1/2x, a fixed sigma) costs
+# 0.96/0.90/1.19 % at 1.5x, 1.18/0.97/1.49 % at 2.5x, 1.59/1.22/1.90 % at 4x. Learning the
+# following scale online (adapt_sigma) narrows it on good stretches and loses the gain
+# (Wiimote, whole-gesture score: 44/41/40 % against 44/46/52 % fixed).
+BANK_SIGMA_SCALE = 2.5
+RECOGNITION_SIGMA_SCALE = 1.5
 FIT_FLOOR = -1.0
 
 
@@ -105,11 +133,13 @@ class FollowerBank:
     templates : {name: (T_k, D) float} (or a sequence of (name, template) pairs): one template per
         action, all with the same D channels [input units].
     sigma : float or (D,) float for every action, or {name: float, (D,) or (T_k, D)}, optional
-        [input units]: emission standard deviation. Default: ``BANK_SIGMA_SCALE`` (1.5) times
-        the follower's default, estimated per template with the base level from all templates
-        together (``followers.defaults``), so every follower measures distance the same way and
-        their likelihoods compare fairly; wider than a lone follower's because another
-        performer's take of an action differs in intensity as well as timing.
+        [input units]: emission standard deviation. Default: two multiples of the follower's
+        default sigma, estimated per template with the base level from all templates together
+        (``followers.defaults``), so every follower measures distance the same way and their
+        likelihoods compare fairly: ``BANK_SIGMA_SCALE`` (2.5) for the forward recursion (the
+        alignment, progress and variance) and ``RECOGNITION_SIGMA_SCALE`` (1.5) for the
+        recognition score of each frame (posterior and rejection), computed from the same
+        predicted states. A given sigma serves both.
     window : int, optional: window half-width p [states] for all followers. Default: per
         template, ``followers.defaults.default_window``.
     transitions : as for :class:`followers.Follower` (default ``"speed"``).
@@ -123,8 +153,9 @@ class FollowerBank:
         of this performer"). A follower accepts the input while its recent log-likelihood beats
         the background's by more than ``reject_margin`` per channel and frame (entering needs
         ``+0.1`` more, leaving ``0.1`` less: hysteresis); ``-inf`` never rejects. Default 0.
-    switch_posterior : float in [0.5, 1]: posterior another action needs to take over the active
-        one (hysteresis; default 0.9).
+    switch_margin : float >= 0 [nats]: how much more evidence (``recent_log_likelihoods``)
+        another action needs than the active one to take over (hysteresis; default 2, a
+        posterior ratio of 7.4).
     outlier_sigmas : as for :class:`followers.Follower`.
     adapt_sigma : bool or None: as for :class:`followers.Follower`, but False by default: a
         bank keeps its sigma fixed, because followers that narrow their sigma to a clean
@@ -136,7 +167,8 @@ class FollowerBank:
 
     def __init__(self, templates, *, sigma=None, window=None, transitions="speed",
                  memory: float = DEFAULT_MEMORY, reject_margin: float = DEFAULT_REJECT_MARGIN,
-                 switch_posterior: float = 0.9, outlier_sigmas=None, adapt_sigma=False):
+                 switch_margin: float = DEFAULT_SWITCH_MARGIN, outlier_sigmas=None,
+                 adapt_sigma=False):
         items = list(templates.items()) if isinstance(templates, Mapping) else list(templates)
         if not items:
             raise ValueError("a FollowerBank needs at least one template, got none")
@@ -181,15 +213,20 @@ class FollowerBank:
         if math.isnan(reject_margin) or reject_margin == math.inf:
             raise ValueError(f"reject_margin must be a number or -inf (never reject), got "
                              f"{reject_margin}")
-        if not 0.5 <= float(switch_posterior) <= 1.0:
-            raise ValueError(f"switch_posterior must be in [0.5, 1], got {switch_posterior}")
+        switch_margin = float(switch_margin)
+        if not (switch_margin >= 0.0 and math.isfinite(switch_margin)):
+            raise ValueError(f"switch_margin must be a finite number of nats >= 0, got "
+                             f"{switch_margin}")
 
         self._names = tuple(names)
         self._index = {n: i for i, n in enumerate(names)}
         self._templates = arrays
         self._transitions = model
-        recognition = None if model.kind == "mop" else [
-            recognition_sigma(a, s) for a, s in zip(arrays, sigmas)]
+        # the recognition score's own (narrower) sigma, only when the sigmas are the defaults: a
+        # given sigma is used for both, as given
+        recognition = None if (model.kind == "mop" or sigma is not None) else [
+            recognition_sigma(a, s * (RECOGNITION_SIGMA_SCALE / BANK_SIGMA_SCALE))
+            for a, s in zip(arrays, sigmas)]
         self._engine = ForwardEngine(arrays, sigmas, windows, model,
                                      cap=resolve_cap(outlier_sigmas, model.kind),
                                      prune=0.0 if model.kind == "mop" else PRUNE_MASS,
@@ -198,7 +235,7 @@ class FollowerBank:
                                          adapt_sigma, sigma is not None, model.kind))
         self.memory = memory
         self.reject_margin = reject_margin
-        self.switch_posterior = float(switch_posterior)
+        self.switch_margin = switch_margin
         self._decay = math.exp(-1.0 / memory)
         self._fit_decay = math.exp(-1.0 / FIT_MEMORY)
         # the background model: one Gaussian over every frame of every template
@@ -311,7 +348,7 @@ class FollowerBank:
             self._background_weight, self._background_log_norm, engine.cap, self._decay, self._fit_decay,
             EVIDENCE_CAP, LEAD_CAP, FIT_FLOOR, self._recent, self._fit, self._fit_weight,
             self._posterior, self._thresholds,
-            self._enter_margin, self._leave_margin, self.switch_posterior, self._state,
+            self._enter_margin, self._leave_margin, self.switch_margin, self._state,
             engine.moments, engine.main, engine.lengths, self._progress, self._variance)
         self._publish()
         return self._out

@@ -415,3 +415,19 @@ def test_bank_evidence_stays_bounded_without_forgetting(rng, actions):
     assert recent.max() == 0.0
     assert recent.min() >= -20.0 - 1e-9
     assert bank.posteriors.sum() == pytest.approx(1.0)
+
+
+def test_bank_switch_margin_is_validated_and_used(rng, actions):
+    """Another action takes over only when its evidence beats the active one's by
+    ``switch_margin`` nats: with an unreachable margin (and no rejection, through which the
+    active action can also be left) the first choice is never left."""
+    for bad in (-1.0, float("nan"), float("inf")):
+        with pytest.raises(ValueError, match="switch_margin"):
+            FollowerBank(actions, switch_margin=bad)
+    wave, _ = time_warp(actions["wave"], 1.0)
+    clap, _ = time_warp(actions["clap"], 1.0)
+    X = np.vstack([wave, clap])
+    said = FollowerBank(actions).follow(X)["action"]
+    stuck = FollowerBank(actions, switch_margin=1e6, reject_margin=-np.inf).follow(X)["action"]
+    assert said[-1] == list(actions).index("clap")
+    assert stuck[-1] == stuck[len(wave) - 1] == list(actions).index("wave")

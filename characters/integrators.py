@@ -263,8 +263,13 @@ class Verlet(Integrator):
     def _advance(self, model, state, h, control, pin_goal) -> int:
         f = self._scratch_for(model).force
         f[...] = 0.0
-        kernels.spring_forces(state.x, state.v, model.springs, model.rest_length,
-                              model.stiffness, model.damping, f)
+        if model.dim == 3:
+            plan = model.plan
+            kernels.spring_forces_3d(state.x, state.v, plan.si, plan.sj, plan.rest_length,
+                                     plan.stiffness, plan.damping, plan.scratch, f)
+        else:
+            kernels.spring_forces(state.x, state.v, model.springs, model.rest_length,
+                                  model.stiffness, model.damping, f)
         kernels.node_forces(state.x, state.v, model.mass, model.gravity, 0.0,
                             control.target_index, control.target_position,
                             control.target_stiffness, control.target_damping,
@@ -462,11 +467,17 @@ class _Factorisation:
                 from None
         self.weight = h * h * model.stiffness * model.rest_length
         self.damping_h = h * model.damping
+        if d == 3:  # the split local step reads them in the plan's order
+            plan = model.plan
+            self.plan = plan
+            self.plan_weight = plan.take(self.weight)
+            self.plan_damping_h = plan.take(self.damping_h)
         self.base = np.zeros((n, d))
         self.rhs = np.zeros((n, d))
         self.solved = np.zeros((n, d))
         self.previous = np.zeros((n, d))
         self.x_start = np.zeros((n, d))
+        self.moved = np.zeros((n, d))
         self.v_start = np.zeros((n, d))
         self.known_positions = np.zeros((n, d))
         self.accel = np.zeros((n, d))
@@ -560,8 +571,15 @@ class ProjectiveDynamics(Integrator):
         rho2 = self.chebyshev_rho ** 2 if chebyshev else 0.0
         omega = 1.0
         damped = bool(model.damping.any())
+        split = model.dim == 3
         for iteration in range(self.iterations):
-            if damped:
+            if split:
+                plan = fac.plan
+                np.subtract(x, fac.x_start, out=fac.moved)
+                kernels.pd_local_rhs_3d(x, fac.moved, plan.si, plan.sj, fac.plan_weight,
+                                        fac.plan_damping_h, fac.base, fac.known_index, known,
+                                        plan.scratch, fac.rhs)
+            elif damped:
                 kernels.pd_local_rhs_damped(x, fac.x_start, model.springs, fac.weight,
                                             fac.damping_h, fac.base, fac.known_index, known,
                                             fac.rhs)

@@ -68,6 +68,36 @@ class SpringState:
         self.t = other.t
 
 
+class SpringPlan:
+    """The springs of a 3D model laid out for the split force kernels (kernels.scatter_runs):
+    each spring oriented so its first node is the smaller index, sorted by that node, indices as
+    uint32, per-spring arrays permuted to match, and one (6, M) scratch buffer reused by every
+    pass. Built once per model (MassSpring.plan); read-only except the scratch.
+
+    si, sj : (M,) uint32; order : (M,) int64 [plan position -> model spring index];
+    rest_length, stiffness, damping : (M,) float64 in plan order; scratch : (6, M) float64.
+    The kernels' sums do not depend on the order; sorting makes them fast. A model stepped
+    from two threads at once would share the scratch: give each thread its own model.
+    """
+
+    def __init__(self, model: "MassSpring"):
+        springs = model.springs
+        first = springs.min(axis=1)
+        second = springs.max(axis=1)
+        order = np.lexsort((second, first))
+        self.order = _readonly(order)
+        self.si = _readonly(np.ascontiguousarray(first[order], dtype=np.uint32))
+        self.sj = _readonly(np.ascontiguousarray(second[order], dtype=np.uint32))
+        self.rest_length = _readonly(np.ascontiguousarray(model.rest_length[order]))
+        self.stiffness = _readonly(np.ascontiguousarray(model.stiffness[order]))
+        self.damping = _readonly(np.ascontiguousarray(model.damping[order]))
+        self.scratch = np.empty((6, len(order)))
+
+    def take(self, values: np.ndarray) -> np.ndarray:
+        """(M,) per-spring values in model order -> a contiguous copy in plan order."""
+        return np.ascontiguousarray(np.asarray(values)[self.order])
+
+
 class MassSpring:
     """A mass-spring system: rest positions, springs, masses, damping, gravity, fixed nodes.
 
@@ -179,6 +209,16 @@ class MassSpring:
 
     # sizes -------------------------------------------------------------------------------
     @property
+    def plan(self) -> SpringPlan:
+        """The springs laid out for the split 3D force kernels (built on first use)."""
+        plan = self.__dict__.get("_plan")
+        if plan is None:
+            if self.dim != 3:
+                raise ValueError(f"SpringPlan is for 3D models, this one is {self.dim}D")
+            plan = self.__dict__["_plan"] = SpringPlan(self)
+        return plan
+
+    @property
     def node_count(self) -> int:
         return self.rest_positions.shape[0]
 
@@ -232,8 +272,15 @@ class MassSpring:
     def forces(self, x: np.ndarray, v: np.ndarray) -> np.ndarray:
         """Internal + gravity + velocity-damping forces (N, d) [N] at x, v (no control)."""
         out = np.zeros_like(x)
-        kernels.spring_forces(x, v, self.springs, self.rest_length, self.stiffness,
-                              self.damping, out)
+        if self.dim == 3:
+            plan = self.plan
+            kernels.spring_forces_3d(np.ascontiguousarray(x, dtype=np.float64),
+                                     np.ascontiguousarray(v, dtype=np.float64), plan.si, plan.sj,
+                                     plan.rest_length, plan.stiffness, plan.damping, plan.scratch,
+                                     out)
+        else:
+            kernels.spring_forces(x, v, self.springs, self.rest_length, self.stiffness,
+                                  self.damping, out)
         out += self.mass[:, None] * (self.gravity[None, :] - self.velocity_damping * v)
         out[self.fixed] = 0.0
         return out

@@ -108,8 +108,13 @@ class Integrator:
 
     def _energy(self, model: MassSpring, x, v, x_ref) -> float:
         """Kinetic + elastic + gravity potential relative to x_ref [J] (for the blow-up check)."""
-        energy = (kernels.kinetic_energy(v, model.mass, model.inverse_mass)
-                  + kernels.spring_energy(x, model.springs, model.rest_length, model.stiffness))
+        if model.dim == 3:
+            plan = model.plan
+            elastic = kernels.spring_energy_3d(x, plan.si, plan.sj, plan.rest_length,
+                                               plan.stiffness, plan.scratch)
+        else:
+            elastic = kernels.spring_energy(x, model.springs, model.rest_length, model.stiffness)
+        energy = kernels.kinetic_energy(v, model.mass, model.inverse_mass) + elastic
         if model.gravity.any():
             energy += kernels.gravity_work(x, x_ref, model.mass, model.inverse_mass,
                                            model.gravity)
@@ -472,6 +477,13 @@ class _Factorisation:
             self.plan = plan
             self.plan_weight = plan.take(self.weight)
             self.plan_damping_h = plan.take(self.damping_h)
+            one_known = known[i] != known[j]
+            ends = np.where(known[i][one_known], 1, 0)  # which column holds the free end
+            pairs = model.springs[one_known]
+            rows = np.arange(len(pairs))
+            self.couple_free = np.ascontiguousarray(pairs[rows, ends], dtype=np.int64)
+            self.couple_known = np.ascontiguousarray(pairs[rows, 1 - ends], dtype=np.int64)
+            self.couple = np.ascontiguousarray(spring[one_known])
         self.base = np.zeros((n, d))
         self.rhs = np.zeros((n, d))
         self.solved = np.zeros((n, d))
@@ -552,9 +564,16 @@ class ProjectiveDynamics(Integrator):
         if control.force_index.size:
             np.add.at(accel, control.force_index,
                       control.force_value / model.mass[control.force_index, None])
-        kernels.pd_base_rhs(fac.x_start, fac.v_start, known, model.springs, model.stiffness,
-                            model.damping, model.mass, accel, fac.free_nodes, fac.free_id, h,
-                            model.velocity_damping, fac.base)
+        if model.dim == 3:
+            plan = fac.plan
+            kernels.pd_base_rhs_3d(fac.x_start, fac.v_start, known, plan.si, plan.sj,
+                                   fac.plan_damping_h, fac.couple_free, fac.couple_known,
+                                   fac.couple, model.mass, accel, fac.free_nodes, h,
+                                   model.velocity_damping, plan.scratch, fac.base)
+        else:
+            kernels.pd_base_rhs(fac.x_start, fac.v_start, known, model.springs, model.stiffness,
+                                model.damping, model.mass, accel, fac.free_nodes, fac.free_id,
+                                h, model.velocity_damping, fac.base)
         if control.target_index.size:
             t = control.target_index
             fac.base[t] += (h * h * control.target_stiffness[:, None] * control.target_position

@@ -81,16 +81,28 @@ def _spring_forces_3d(x, v, springs, rest, k, c, out):
 
 @njit(**_JIT)
 def gather_edges(x, si, sj, e):
-    """e[0:3] (3, M) [m] = x[sj] - x[si] for x (N, 3)."""
+    """e[0:3] (3, M) [m] = x[sj] - x[si] for x (N, 3); x[si] is read once per run of equal si."""
     ex = e[0]
     ey = e[1]
     ez = e[2]
-    for s in range(si.shape[0]):
-        i = si[s]
+    m = si.shape[0]
+    if m == 0:
+        return
+    i = si[0]
+    xi = x[i, 0]
+    yi = x[i, 1]
+    zi = x[i, 2]
+    for s in range(m):
+        n = si[s]
+        if n != i:
+            i = n
+            xi = x[i, 0]
+            yi = x[i, 1]
+            zi = x[i, 2]
         j = sj[s]
-        ex[s] = x[j, 0] - x[i, 0]
-        ey[s] = x[j, 1] - x[i, 1]
-        ez[s] = x[j, 2] - x[i, 2]
+        ex[s] = x[j, 0] - xi
+        ey[s] = x[j, 1] - yi
+        ez[s] = x[j, 2] - zi
 
 
 @njit(**_JIT)
@@ -714,6 +726,52 @@ def pd_local_rhs_3d(x, moved, si, sj, weight, damping_h, base, known_index, know
         out[i, 0] = known[i, 0]
         out[i, 1] = known[i, 1]
         out[i, 2] = known[i, 2]
+
+
+@njit(**_JIT)
+def pd_base_rhs_3d(x0, v0, known, si, sj, damping_h, couple_free, couple_known, couple,
+                   mass, accel, free_nodes, h, velocity_damping, scratch, out):
+    """pd_base_rhs for 3D models in split passes (free_id is the identity on free nodes here).
+
+    Rows of known nodes receive stray sums: the local step overwrites them. damping_h (M,)
+    = h c in plan order; couple_free, couple_known (B,) int64 [node], couple (B,) [kg]: the
+    springs with exactly one known end, h^2 k + h c, which pull their free end towards the
+    known end's position.
+    """
+    for f in range(free_nodes.shape[0]):
+        i = free_nodes[f]
+        m = mass[i]
+        for a in range(3):
+            y = x0[i, a] + h * v0[i, a] + h * h * accel[i, a]
+            out[i, a] = m * y + h * velocity_damping * m * x0[i, a]
+    gather_edges(x0, si, sj, scratch)
+    ex = scratch[0]
+    ey = scratch[1]
+    ez = scratch[2]
+    for s in range(ex.shape[0]):  # h c (x0_i - x0_j) on i, its negative on j
+        ex[s] *= -damping_h[s]
+        ey[s] *= -damping_h[s]
+        ez[s] *= -damping_h[s]
+    scatter_runs(si, sj, scratch, out)
+    for b in range(couple_free.shape[0]):
+        i = couple_free[b]
+        j = couple_known[b]
+        for a in range(3):
+            out[i, a] += couple[b] * known[j, a]
+
+
+@njit(**_JIT)
+def spring_energy_3d(x, si, sj, rest, k, scratch):
+    """sum k (l - r)^2 / 2 [J] for x (N, 3), split passes (rest, k in plan order)."""
+    gather_edges(x, si, sj, scratch)
+    ex = scratch[0]
+    ey = scratch[1]
+    ez = scratch[2]
+    total = 0.0
+    for s in range(ex.shape[0]):
+        stretch = np.sqrt(ex[s] * ex[s] + ey[s] * ey[s] + ez[s] * ez[s]) - rest[s]
+        total += 0.5 * k[s] * stretch * stretch
+    return total
 
 
 @njit(**_JIT)

@@ -335,28 +335,13 @@ def recognition(args):
 
 
 def load_wiimote(split):
-    """PickupGestureWiimoteZ from inside the aeon wheel (read directly, without importing aeon):
-    a list of (T_i, 1) float arrays [g] (variable length) and (N,) str labels "1".."10"."""
-    import importlib.util
-    spec = importlib.util.find_spec("aeon")
-    if spec is None:
-        raise SystemExit("the Wiimote gestures need aeon: pip install -e .[test]")
-    path = os.path.join(spec.submodule_search_locations[0], "datasets", "data",
-                        "PickupGestureWiimoteZ", f"PickupGestureWiimoteZ_{split}.ts")
-    series, labels = [], []
-    data = False
-    with open(path, encoding="utf-8") as handle:
-        for line in handle:
-            line = line.strip()
-            if not line or line.startswith("#"):
-                continue
-            if line.lower().startswith("@data"):
-                data = True
-            elif data:
-                values, label = line.rsplit(":", 1)
-                series.append(np.array([float(v) for v in values.split(",")])[:, None])
-                labels.append(label)
-    return series, np.array(labels)
+    """PickupGestureWiimoteZ from inside the aeon wheel: a list of (T_i, 1) float arrays [g]
+    (variable length) and (N,) str labels "1".."10"."""
+    from followers import aeon_dataset
+    try:
+        return aeon_dataset("PickupGestureWiimoteZ", split)
+    except ImportError as error:
+        raise SystemExit(str(error)) from None
 
 
 def wiimote(args):

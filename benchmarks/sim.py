@@ -182,6 +182,21 @@ def force_pass_rate(model, repeats=200) -> tuple[float, float, float]:
     return rates[0], rates[1], rates[2]
 
 
+def numpy_explicit_ms(model, dt, frames, pins) -> float:
+    """ms per frame of the plain NumPy explicit integrator at its stable substeps (a few
+    frames timed)."""
+    substeps = verlet_substeps(model, dt)
+    state = model.state()
+    h = dt / substeps
+    sample = min(frames, 3)
+    start = time.perf_counter()
+    for n in range(sample):
+        goal = model.rest_positions[pins] + hand((n + 1) * dt)
+        for _ in range(substeps):
+            numpy_explicit_step(model, state.x, state.v, h, pins, goal)
+    return (time.perf_counter() - start) / sample * 1e3
+
+
 def integrators(model, dt):
     return {
         "projective (default: 8 it, Chebyshev)": ProjectiveDynamics(),
@@ -208,6 +223,9 @@ def main(argv=None) -> int:
     parser.add_argument("--no-picture", action="store_true")
     parser.add_argument("--meshes", default="table,10k,30k",
                         help="comma-separated subset of table,10k,30k (default all)")
+    parser.add_argument("--default-only", action="store_true",
+                        help="time only the default integrator and the force pass (no NumPy "
+                             "explicit ratio, no other integrators): a quick re-timing")
     parser.add_argument("--no-reference", action="store_true",
                         help="skip the converged reference (no RMS column; much faster)")
     args = parser.parse_args(argv)
@@ -257,20 +275,15 @@ def main(argv=None) -> int:
                 print(f"   reference at {rate} fps: Verlet, {substeps} substeps per frame ...",
                       flush=True)
                 reference = reference_run(model, dt, frames, pins, substeps)
-            # the plain NumPy explicit integrator: time a few frames at the stable substeps
-            substeps = verlet_substeps(model, dt)
-            state = model.state()
-            h = dt / substeps
-            sample = min(frames, 3)
-            start = time.perf_counter()
-            for n in range(sample):
-                goal = model.rest_positions[pins] + hand((n + 1) * dt)
-                for _ in range(substeps):
-                    numpy_explicit_step(model, state.x, state.v, h, pins, goal)
-            numpy_ms = (time.perf_counter() - start) / sample * 1e3
-            print(f"   {rate} fps: plain NumPy explicit ({substeps} substeps): "
-                  f"{numpy_ms:.1f} ms/frame")
-            for name, integrator in integrators(model, dt).items():
+            chosen_integrators = integrators(model, dt)
+            if args.default_only:
+                numpy_ms = math.nan
+                chosen_integrators = dict(list(chosen_integrators.items())[:1])
+            else:
+                numpy_ms = numpy_explicit_ms(model, dt, frames, pins)
+                print(f"   {rate} fps: plain NumPy explicit ({verlet_substeps(model, dt)} "
+                      f"substeps): {numpy_ms:.1f} ms/frame")
+            for name, integrator in chosen_integrators.items():
                 integrator.step(model, model.state(), dt)  # compile / factorise outside timing
                 record = [] if reference is not None else None
                 seconds, failures, retries, _ = run(model, integrator, dt, frames, pins,

@@ -19,19 +19,26 @@ _JIT = dict(cache=True, nogil=True, fastmath=True, error_model="numpy")
 # --- forces ---------------------------------------------------------------------------------
 
 @njit(**_JIT)
+def _length2(x, i, j):
+    """|x_j - x_i|^2 for x (N, d)."""
+    total = 0.0
+    for a in range(x.shape[1]):
+        e = x[j, a] - x[i, a]
+        total += e * e
+    return total
+
+
+@njit(**_JIT)
 def spring_forces(x, v, springs, rest, k, c, out):
-    """Add every spring's elastic + along-spring damping force to out (N, d) [N]."""
+    """Add every spring's elastic + along-spring damping force to out (N, d) [N].
+
+    One fused loop per spring, any d: the 2D models' force pass, and the plain reference the
+    split 3D kernels below are tested against."""
     d = x.shape[1]
-    if d == 3:
-        _spring_forces_3d(x, v, springs, rest, k, c, out)
-        return
     for s in range(springs.shape[0]):
         i = springs[s, 0]
         j = springs[s, 1]
-        length2 = 0.0
-        for a in range(d):
-            e = x[j, a] - x[i, a]
-            length2 += e * e
+        length2 = _length2(x, i, j)
         length = np.sqrt(length2)
         inv = 1.0 / length if length > 0.0 else 0.0
         rel = 0.0
@@ -42,30 +49,6 @@ def spring_forces(x, v, springs, rest, k, c, out):
             fa = mag * (x[j, a] - x[i, a]) * inv
             out[i, a] += fa
             out[j, a] -= fa
-
-
-@njit(**_JIT)
-def _spring_forces_3d(x, v, springs, rest, k, c, out):
-    for s in range(springs.shape[0]):
-        i = springs[s, 0]
-        j = springs[s, 1]
-        ex = x[j, 0] - x[i, 0]
-        ey = x[j, 1] - x[i, 1]
-        ez = x[j, 2] - x[i, 2]
-        length2 = ex * ex + ey * ey + ez * ez
-        inv = 1.0 / np.sqrt(length2) if length2 > 0.0 else 0.0
-        rel = ((v[j, 0] - v[i, 0]) * ex + (v[j, 1] - v[i, 1]) * ey + (v[j, 2] - v[i, 2]) * ez)
-        # k (l - r) / l and c (dv.e) / l^2 : the force is (that) * e
-        mag = (k[s] * (1.0 - rest[s] * inv) + c[s] * rel * inv * inv)
-        fx = mag * ex
-        fy = mag * ey
-        fz = mag * ez
-        out[i, 0] += fx
-        out[i, 1] += fy
-        out[i, 2] += fz
-        out[j, 0] -= fx
-        out[j, 1] -= fy
-        out[j, 2] -= fz
 
 
 # --- split spring passes (3D), the per-step force kernels ------------------------------------
@@ -217,15 +200,11 @@ def spring_forces_elastic_fused(x, springs, rest, k, out):
 @njit(**_JIT)
 def spring_energy(x, springs, rest, k):
     """sum k (l - r)^2 / 2 [J]."""
-    d = x.shape[1]
     total = 0.0
     for s in range(springs.shape[0]):
         i = springs[s, 0]
         j = springs[s, 1]
-        length2 = 0.0
-        for a in range(d):
-            e = x[j, a] - x[i, a]
-            length2 += e * e
+        length2 = _length2(x, i, j)
         stretch = np.sqrt(length2) - rest[s]
         total += 0.5 * k[s] * stretch * stretch
     return total
@@ -597,46 +576,33 @@ def pd_base_rhs(x0, v0, known, springs, k, c, mass, accel, free_nodes, free_id, 
 
 
 @njit(**_JIT)
+def _set_known_rows(known_index, known, out):
+    for t in range(known_index.shape[0]):
+        i = known_index[t]
+        for a in range(out.shape[1]):
+            out[i, a] = known[i, a]
+
+
+@njit(**_JIT)
 def pd_local_rhs(x, springs, weight, base, known_index, known, out):
     """Local step fused with the right-hand side: out = base + h^2 J d(x), known rows = known.
 
     d_s = r_s (x_j - x_i) / |x_j - x_i| is spring s projected onto its rest length r_s;
     weight (M,) = h^2 k_s r_s, so each spring adds weight_s (x_j - x_i) / |x_j - x_i|.
+    One fused loop, any d (2D models; the reference for pd_local_rhs_3d).
     """
     d = x.shape[1]
     out[...] = base
-    if d == 3:
-        for s in range(springs.shape[0]):
-            i = springs[s, 0]
-            j = springs[s, 1]
-            ex = x[j, 0] - x[i, 0]
-            ey = x[j, 1] - x[i, 1]
-            ez = x[j, 2] - x[i, 2]
-            length2 = ex * ex + ey * ey + ez * ez
-            scale = weight[s] / np.sqrt(length2) if length2 > 0.0 else 0.0
-            out[j, 0] += scale * ex
-            out[j, 1] += scale * ey
-            out[j, 2] += scale * ez
-            out[i, 0] -= scale * ex
-            out[i, 1] -= scale * ey
-            out[i, 2] -= scale * ez
-    else:
-        for s in range(springs.shape[0]):
-            i = springs[s, 0]
-            j = springs[s, 1]
-            length2 = 0.0
-            for a in range(d):
-                e = x[j, a] - x[i, a]
-                length2 += e * e
-            scale = weight[s] / np.sqrt(length2) if length2 > 0.0 else 0.0
-            for a in range(d):
-                pa = scale * (x[j, a] - x[i, a])
-                out[j, a] += pa
-                out[i, a] -= pa
-    for t in range(known_index.shape[0]):
-        i = known_index[t]
+    for s in range(springs.shape[0]):
+        i = springs[s, 0]
+        j = springs[s, 1]
+        length2 = _length2(x, i, j)
+        scale = weight[s] / np.sqrt(length2) if length2 > 0.0 else 0.0
         for a in range(d):
-            out[i, a] = known[i, a]
+            pa = scale * (x[j, a] - x[i, a])
+            out[j, a] += pa
+            out[i, a] -= pa
+    _set_known_rows(known_index, known, out)
 
 
 @njit(**_JIT)
@@ -647,47 +613,31 @@ def pd_local_rhs_damped(x, x_start, springs, weight, damping_h, base, known_inde
     prefactored); here the transverse part of that, h c (I - u u^T) (w_j - w_i) with
     w = x - x_start = h v, is handed back on the right-hand side at the current iterate, so
     the fixed point damps only along each spring (rigid rotation is not braked).
-    damping_h (M,) = h c_s [kg].
+    damping_h (M,) = h c_s [kg]. Fused loops, any d (2D; the reference for pd_local_rhs_3d).
     """
     d = x.shape[1]
-    if d != 3:
-        _pd_local_rhs_damped_nd(x, x_start, springs, weight, damping_h, base, known_index,
-                                known, out)
-        return
-    out[...] = base
+    pd_local_rhs(x, springs, weight, base, known_index, known, out)
     for s in range(springs.shape[0]):
+        hc = damping_h[s]
+        if hc == 0.0:
+            continue
         i = springs[s, 0]
         j = springs[s, 1]
-        ex = x[j, 0] - x[i, 0]
-        ey = x[j, 1] - x[i, 1]
-        ez = x[j, 2] - x[i, 2]
-        length2 = ex * ex + ey * ey + ez * ez
+        length2 = 0.0
+        along = 0.0
+        for a in range(d):
+            e = x[j, a] - x[i, a]
+            length2 += e * e
+            along += e * ((x[j, a] - x_start[j, a]) - (x[i, a] - x_start[i, a]))
         if length2 == 0.0:
             continue
-        inv2 = 1.0 / length2
-        scale = weight[s] * np.sqrt(inv2)
-        fx = scale * ex
-        fy = scale * ey
-        fz = scale * ez
-        hc = damping_h[s]
-        if hc != 0.0:
-            wx = (x[j, 0] - x_start[j, 0]) - (x[i, 0] - x_start[i, 0])
-            wy = (x[j, 1] - x_start[j, 1]) - (x[i, 1] - x_start[i, 1])
-            wz = (x[j, 2] - x_start[j, 2]) - (x[i, 2] - x_start[i, 2])
-            along = (ex * wx + ey * wy + ez * wz) * inv2
-            fx += hc * (wx - along * ex)
-            fy += hc * (wy - along * ey)
-            fz += hc * (wz - along * ez)
-        out[j, 0] += fx
-        out[j, 1] += fy
-        out[j, 2] += fz
-        out[i, 0] -= fx
-        out[i, 1] -= fy
-        out[i, 2] -= fz
-    for t in range(known_index.shape[0]):
-        i = known_index[t]
+        along /= length2
         for a in range(d):
-            out[i, a] = known[i, a]
+            w = (x[j, a] - x_start[j, a]) - (x[i, a] - x_start[i, a])
+            corr = hc * (w - along * (x[j, a] - x[i, a]))
+            out[j, a] += corr
+            out[i, a] -= corr
+    _set_known_rows(known_index, known, out)
 
 
 @njit(**_JIT)
@@ -721,11 +671,7 @@ def pd_local_rhs_3d(x, moved, si, sj, weight, damping_h, base, known_index, know
                     weight, damping_h)
     out[...] = base
     scatter_runs(si, sj, scratch, out)
-    for t in range(known_index.shape[0]):
-        i = known_index[t]
-        out[i, 0] = known[i, 0]
-        out[i, 1] = known[i, 1]
-        out[i, 2] = known[i, 2]
+    _set_known_rows(known_index, known, out)
 
 
 @njit(**_JIT)
@@ -772,37 +718,6 @@ def spring_energy_3d(x, si, sj, rest, k, scratch):
         stretch = np.sqrt(ex[s] * ex[s] + ey[s] * ey[s] + ez[s] * ez[s]) - rest[s]
         total += 0.5 * k[s] * stretch * stretch
     return total
-
-
-@njit(**_JIT)
-def _pd_local_rhs_damped_nd(x, x_start, springs, weight, damping_h, base, known_index, known,
-                            out):
-    d = x.shape[1]
-    pd_local_rhs(x, springs, weight, base, known_index, known, out)
-    for s in range(springs.shape[0]):
-        hc = damping_h[s]
-        if hc == 0.0:
-            continue
-        i = springs[s, 0]
-        j = springs[s, 1]
-        length2 = 0.0
-        along = 0.0
-        for a in range(d):
-            e = x[j, a] - x[i, a]
-            length2 += e * e
-            along += e * ((x[j, a] - x_start[j, a]) - (x[i, a] - x_start[i, a]))
-        if length2 == 0.0:
-            continue
-        along /= length2
-        for a in range(d):
-            w = (x[j, a] - x_start[j, a]) - (x[i, a] - x_start[i, a])
-            corr = hc * (w - along * (x[j, a] - x[i, a]))
-            out[j, a] += corr
-            out[i, a] -= corr
-    for t in range(known_index.shape[0]):
-        i = known_index[t]
-        for a in range(d):
-            out[i, a] = known[i, a]
 
 
 @njit(**_JIT)

@@ -35,6 +35,9 @@ _EXPORTS = {
     # feedback after recording
     "confusability": "followers.confusion",
     "Confusability": "followers.confusion",
+    # published gesture recordings (.ts files)
+    "read_ts": "followers.datasets",
+    "aeon_dataset": "followers.datasets",
 }
 
 __all__ = sorted(_EXPORTS)

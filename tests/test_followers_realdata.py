@@ -114,29 +114,13 @@ def test_interval_is_calibrated_on_held_out_gestures(rng, speed):
 # ---- real Wiimote gestures: PickupGestureWiimoteZ, shipped inside the aeon wheel ----------------
 
 def _load_wiimote(split):
-    """(list of (T_i, 1) float [g], (N,) str labels): read from the .ts file in the aeon wheel
-    without importing aeon (its import is slow); skips when aeon is not installed."""
-    import importlib.util
-    import os
-    spec = importlib.util.find_spec("aeon")
-    if spec is None:
-        pytest.skip("aeon is not installed (pip install -e .[test])")
-    path = os.path.join(spec.submodule_search_locations[0], "datasets", "data",
-                        "PickupGestureWiimoteZ", f"PickupGestureWiimoteZ_{split}.ts")
-    series, labels = [], []
-    data = False
-    with open(path, encoding="utf-8") as handle:
-        for line in handle:
-            line = line.strip()
-            if not line or line.startswith("#"):
-                continue
-            if line.lower().startswith("@data"):
-                data = True
-            elif data:
-                values, label = line.rsplit(":", 1)
-                series.append(np.array([float(v) for v in values.split(",")])[:, None])
-                labels.append(label)
-    return series, np.array(labels)
+    """(list of (T_i, 1) float [g], (N,) str labels), from the .ts file in the aeon wheel;
+    skips when aeon is not installed."""
+    from followers import aeon_dataset
+    try:
+        return aeon_dataset("PickupGestureWiimoteZ", split)
+    except ImportError as error:
+        pytest.skip(str(error))
 
 
 @pytest.fixture(scope="module")
@@ -206,3 +190,38 @@ def test_unrecorded_wiimote_gesture_rejected_with_auroc_0_9(wiimote):
             (negative if label == held else positive).append(score)
         aucs.append(_auroc(positive, negative))
     assert np.mean(aucs) >= 0.9
+
+
+def test_read_ts_multichannel_missing_values_and_errors(tmp_path):
+    """The .ts reader against a file written here: channels split at ':', '?' as NaN, the
+    label last, lengths that differ between recordings; malformed lines are named."""
+    from followers import read_ts
+    path = tmp_path / "toy.ts"
+    path.write_text("# a comment\n@problemName toy\n@classLabel true a b\n@data\n"
+                    "1,2,3:4,5,6:a\n7,?:8.5,9:b\n", encoding="utf-8")
+    series, labels = read_ts(path)
+    assert list(labels) == ["a", "b"]
+    np.testing.assert_array_equal(series[0], [[1, 4], [2, 5], [3, 6]])
+    assert series[1].shape == (2, 2) and np.isnan(series[1][1, 0]) and series[1][1, 1] == 9
+    path.write_text("@classLabel true a\n@data\n1,2:3:a\n", encoding="utf-8")
+    with pytest.raises(ValueError, match=r"line 3: channels of different lengths \[2, 1\]"):
+        read_ts(path)
+    path.write_text("@data\n1,x\n", encoding="utf-8")
+    with pytest.raises(ValueError, match="line 2: not a number"):
+        read_ts(path)
+    path.write_text("1,2,3\n", encoding="utf-8")
+    with pytest.raises(ValueError, match="no @data section"):
+        read_ts(path)
+
+
+def test_wiimote_files_read_as_published():
+    """PickupGestureWiimoteZ as the archive describes it: 50 train and 50 test gestures of one
+    channel, 10 classes of 5 each, 29-361 frames."""
+    X, y = _load_wiimote("TRAIN")
+    Xt, yt = _load_wiimote("TEST")
+    assert len(X) == len(Xt) == 50
+    assert sorted(set(y), key=int) == [str(c) for c in range(1, 11)]
+    assert all(np.count_nonzero(y == c) == 5 for c in set(y))
+    lengths = [len(s) for s in X + Xt]
+    assert min(lengths) == 29 and max(lengths) == 361
+    assert all(s.shape[1] == 1 and np.isfinite(s).all() for s in X + Xt)

@@ -258,7 +258,6 @@ def test_dualshock4_and_p5_glove_through_hidraw(tmp_path, shim, rng):
 
 
 def test_unplugged_device_is_reported_and_reconnected(tmp_path, shim):
-    profile = load_profile("spacemouse")
     reports = [b"\x01" + np.array([k, -k, 2 * k], "<i2").tobytes() for k in range(150)]
     out = run_simulated(tmp_path, shim, spec="hid:spacemouse", vendor=0x046D, product=0xC626,
                         name="SpaceNavigator", manufacturer="3Dconnexion",

@@ -219,8 +219,8 @@ def remove_background(image: np.ndarray, *, tolerance: float | None = None,
     else:
         rgb = image
         if int(rgb.max()) - int(rgb.min()) <= 2:
-            raise ValueError(f"image is uniform (every pixel is about #%02x%02x%02x): there is no "
-                             f"character to cut out" % tuple(int(c) for c in rgb[0, 0]))
+            raise ValueError("image is uniform (every pixel is about #%02x%02x%02x): there is no "
+                             "character to cut out" % tuple(int(c) for c in rgb[0, 0]))
         background_colour, spread = estimate_background(rgb)
         if spread > MAX_BACKGROUND_NOISE:
             raise ValueError(f"no separable foreground: the image corners vary by {spread:.0f} "

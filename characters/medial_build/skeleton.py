@@ -199,7 +199,7 @@ def _build_grid(triangles, low, cell, shape):
 @njit(cache=True)
 def _first_hits_grid(origins, directions, triangles, min_hit, low, cell, shape, starts, items):
     """Nearest hit per ray, walking the grid cells the ray crosses (Amanatides-Woo)."""
-    nx, ny, nz = shape[0], shape[1], shape[2]
+    ny, nz = shape[1], shape[2]
     result = np.full(origins.shape[0], np.inf)
     index = np.empty(3, dtype=np.int64)
     step = np.empty(3, dtype=np.int64)

@@ -93,8 +93,6 @@ def follow(bank, values, actions):
 
 
 def run(args) -> int:
-    import numpy as np
-
     from mop.session.build import resample
 
     bank, fps, channels, shift, scale, actions, target = bank_for(args)

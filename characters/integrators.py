@@ -108,13 +108,8 @@ class Integrator:
 
     def _energy(self, model: MassSpring, x, v, x_ref) -> float:
         """Kinetic + elastic + gravity potential relative to x_ref [J] (for the blow-up check)."""
-        if model.dim == 3:
-            plan = model.plan
-            elastic = kernels.spring_energy_3d(x, plan.si, plan.sj, plan.rest_length,
-                                               plan.stiffness, plan.scratch)
-        else:
-            elastic = kernels.spring_energy(x, model.springs, model.rest_length, model.stiffness)
-        energy = kernels.kinetic_energy(v, model.mass, model.inverse_mass) + elastic
+        energy = (kernels.kinetic_energy(v, model.mass, model.inverse_mass)
+                  + model.spring_energy(x))
         if model.gravity.any():
             energy += kernels.gravity_work(x, x_ref, model.mass, model.inverse_mass,
                                            model.gravity)
@@ -268,13 +263,7 @@ class Verlet(Integrator):
     def _advance(self, model, state, h, control, pin_goal) -> int:
         f = self._scratch_for(model).force
         f[...] = 0.0
-        if model.dim == 3:
-            plan = model.plan
-            kernels.spring_forces_3d(state.x, state.v, plan.si, plan.sj, plan.rest_length,
-                                     plan.stiffness, plan.damping, plan.scratch, f)
-        else:
-            kernels.spring_forces(state.x, state.v, model.springs, model.rest_length,
-                                  model.stiffness, model.damping, f)
+        model.add_spring_forces(state.x, state.v, f)
         kernels.node_forces(state.x, state.v, model.mass, model.gravity, 0.0,
                             control.target_index, control.target_position,
                             control.target_stiffness, control.target_damping,

@@ -251,7 +251,22 @@ class MassSpring:
 
     def spring_energy(self, x: np.ndarray) -> float:
         """Elastic energy sum k (l - r)^2 / 2 [J] at positions x : (N, d) float [m]."""
+        if self.dim == 3:
+            plan = self.plan
+            return float(kernels.spring_energy_3d(x, plan.si, plan.sj, plan.rest_length,
+                                                  plan.stiffness, plan.scratch))
         return float(kernels.spring_energy(x, self.springs, self.rest_length, self.stiffness))
+
+    def add_spring_forces(self, x: np.ndarray, v: np.ndarray, out: np.ndarray) -> None:
+        """Add every spring's elastic + along-spring damping force to out (N, d) [N] at x, v
+        (N, d) float64: the split kernels over the plan in 3D, the fused loop in 2D."""
+        if self.dim == 3:
+            plan = self.plan
+            kernels.spring_forces_3d(x, v, plan.si, plan.sj, plan.rest_length, plan.stiffness,
+                                     plan.damping, plan.scratch, out)
+        else:
+            kernels.spring_forces(x, v, self.springs, self.rest_length, self.stiffness,
+                                  self.damping, out)
 
     def kinetic_energy(self, v: np.ndarray) -> float:
         """sum m |v|^2 / 2 [J] over free nodes; v : (N, d) float [m/s]."""
@@ -272,15 +287,7 @@ class MassSpring:
     def forces(self, x: np.ndarray, v: np.ndarray) -> np.ndarray:
         """Internal + gravity + velocity-damping forces (N, d) [N] at x, v (no control)."""
         out = np.zeros_like(x)
-        if self.dim == 3:
-            plan = self.plan
-            kernels.spring_forces_3d(np.ascontiguousarray(x, dtype=np.float64),
-                                     np.ascontiguousarray(v, dtype=np.float64), plan.si, plan.sj,
-                                     plan.rest_length, plan.stiffness, plan.damping, plan.scratch,
-                                     out)
-        else:
-            kernels.spring_forces(x, v, self.springs, self.rest_length, self.stiffness,
-                                  self.damping, out)
+        self.add_spring_forces(x, v, out)
         out += self.mass[:, None] * (self.gravity[None, :] - self.velocity_damping * v)
         out[self.fixed] = 0.0
         return out

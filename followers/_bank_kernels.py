@@ -13,9 +13,11 @@ import numpy as np
 
 @nb.njit(cache=True)
 def bank_decide(frame_loglik, xs, observed, n_obs, background_mean, background_weight,
-                background_log_norm, cap, decay, fit_decay, evidence_cap, lead_cap, fit_floor, recent, fit,
-                fit_weight, posterior, thresholds, enter_margin, leave_margin, switch_margin,
-                state, moments, main, lengths, progress, variance):
+                background_log_norm, cap, decay, fit_decay, evidence_cap, lead_cap, fit_floor,
+                recent, fit, likelihood_fit, fit_weight, pace, last_position, last_main,
+                since_end, end_fraction, pace_floor, pace_decay,
+                pace_reference, pace_weight, posterior, thresholds, enter_margin, leave_margin,
+                switch_margin, state, moments, main, lengths, progress, variance):
     """Update the bank's decision after one frame.
 
     frame_loglik (2, K) float: each follower's log-likelihood of this frame under its own
@@ -37,9 +39,23 @@ def bank_decide(frame_loglik, xs, observed, n_obs, background_mean, background_w
         the same reason (an action that was badly rejected recovers within a few frames)
     recent (K,) float in/out: forgetful sum of frame log-likelihoods relative to each frame's
         best follower, bounded as above, then shifted so that the leader is at 0 (<= 0 each)
-    fit (K,) float in/out: forgetful mean over frames of the per-channel log-likelihood ratio
-        of each follower against the background model [nats per channel per frame]
+    likelihood_fit (K,) float in/out: forgetful mean over frames of the per-channel
+        log-likelihood ratio of each follower against the background model [nats per channel
+        per frame]
     fit_weight (1,) float in/out: normaliser of that mean
+    pace (K,) float in/out: forgetful mean of each follower's forward advance per frame
+        [states per frame] (time constant 1 / (1 - pace_decay) frames; starts at
+        ``pace_reference``); last_position (K,) float in/out: main-track mean state last frame;
+        last_main (K,) int64 in/out: each follower's main track last frame (a change: a new
+        repetition began); since_end (K,) float in/out: frames since the follower's progress last reached
+        ``end_fraction`` (its mean rarely sits on the last state itself)
+    end_fraction : float in (0, 1]: progress from which a follower has performed its action
+    pace_floor : float > 0 [states per frame]: ``pace`` never falls below it
+    pace_decay : float in [0, 1); pace_reference : float > 0 [states per frame];
+        pace_weight : float >= 0 [nats per channel per frame]: the progress-plausibility term
+        (see ``FollowerBank``): ``pace_weight * min(0, log(pace / pace_reference))``
+    fit (K,) float out: ``likelihood_fit`` plus that (non-positive) term: what the rejection
+        compares with ``thresholds``
     posterior (K,) float out: softmax of ``recent``
     thresholds (K,) float: a follower accepts the input when ``fit >= threshold``
     enter_margin, leave_margin : float >= 0: hysteresis on the rejection (to become active an
@@ -57,6 +73,32 @@ def bank_decide(frame_loglik, xs, observed, n_obs, background_mean, background_w
         progress[k] = moments[k, t, 1] * scale
         variance[k] = moments[k, t, 2] * scale * scale
     if n_obs > 0:
+        for k in range(K):
+            position = progress[k] * (lengths[k] - 1)
+            step = position - last_position[k]
+            restarted = main[k] != last_main[k]
+            last_main[k] = main[k]
+            if step < 0.0:
+                # a hesitation is no evidence of advancing
+                step = 0.0
+            if progress[k] >= end_fraction:
+                since_end[k] = 0.0
+            else:
+                since_end[k] += 1.0
+            if since_end[k] <= lengths[k]:
+                # a follower that reached the end of its template has performed the whole
+                # action: holding the end pose (which often resembles the first, so a new
+                # repetition takes over) is not being stuck, for as long as the action took
+                step = pace_reference
+            last_position[k] = position
+            if restarted:
+                # a new repetition took over: it is judged afresh
+                pace[k] = pace_reference
+            pace[k] = pace_decay * pace[k] + (1.0 - pace_decay) * step
+            if pace[k] < pace_floor:
+                # bounded, so that an action that was idle for long is judged afresh within a
+                # few frames once it is performed (a switch from another action)
+                pace[k] = pace_floor
         D = observed.shape[0]
         background = 0.0
         for d in range(D):
@@ -82,7 +124,12 @@ def bank_decide(frame_loglik, xs, observed, n_obs, background_mean, background_w
             per_channel = (value - background) / n_obs
             if per_channel < fit_floor:
                 per_channel = fit_floor
-            fit[k] = fit[k] + (per_channel - fit[k]) * inv_w
+            likelihood_fit[k] = likelihood_fit[k] + (per_channel - likelihood_fit[k]) * inv_w
+        for k in range(K):
+            # a performance of the action advances through its template; an input that a stretch
+            # of it merely resembles (a rest pose) keeps the follower stuck there
+            penalty = pace_weight * math.log(pace[k] / pace_reference)
+            fit[k] = likelihood_fit[k] + (penalty if penalty < 0.0 else 0.0)
         # relative to the leader: without forgetting (decay 1) the sums would drift without bound
         for k in range(K):
             if recent[k] < leader - lead_cap:

@@ -431,3 +431,22 @@ def test_bank_switch_margin_is_validated_and_used(rng, actions):
     stuck = FollowerBank(actions, switch_margin=1e6, reject_margin=-np.inf).follow(X)["action"]
     assert said[-1] == list(actions).index("clap")
     assert stuck[-1] == stuck[len(wave) - 1] == list(actions).index("wave")
+
+
+def test_bank_pace_term_rejects_a_pose_held_from_the_middle_of_an_action(rng, actions):
+    """``pace_weight``: an input that holds a pose which one action also holds for a while (a
+    rest in its middle) fits that action's follower as well as a performance would, so the
+    likelihood alone accepts it; it does not advance through the template, so the pace term
+    rejects it, while a real (slow, 0.6x) performance of the action stays accepted."""
+    nod = actions["nod"]
+    actions["nod"] = np.vstack([nod[:30], np.repeat(nod[30:31], 30, axis=0), nod[30:]])
+    hold = np.repeat(nod[30:31], 150, axis=0) + rng.normal(scale=0.05, size=(150, 4))
+    performance, _ = time_warp(actions["nod"], 0.6)
+    plain = FollowerBank(actions)
+    paced = FollowerBank(actions, pace_weight=2.0)
+    assert np.mean(plain.follow(hold)["action"][20:] == -1) < 0.1
+    assert np.mean(paced.follow(hold)["action"][20:] == -1) > 0.6
+    assert np.mean(paced.follow(performance)["action"][10:] == 1) > 0.95
+    for bad in (-1.0, float("nan"), float("inf")):
+        with pytest.raises(ValueError, match="pace_weight must be a finite number >= 0"):
+            FollowerBank(actions, pace_weight=bad)

@@ -69,13 +69,14 @@ class SpringState:
 
 
 class SpringPlan:
-    """The springs of a 3D model laid out for the split force kernels (kernels.scatter_runs):
+    """The springs of a 3D model laid out for the split force kernels (kernels.scatter_rows):
     each spring oriented so its first node is the smaller index, sorted by that node, indices as
-    uint32, per-spring arrays permuted to match, and one (6, M) scratch buffer reused by every
-    pass. Built once per model (MassSpring.plan); read-only except the scratch.
+    uint32, per-spring arrays permuted to match, and one (6, C) scratch buffer reused by every
+    pass, C = min(M, kernels.SPLIT_CHUNK) springs (the passes run chunk by chunk). Built once
+    per model (MassSpring.plan); read-only except the scratch.
 
     si, sj : (M,) uint32; order : (M,) int64 [plan position -> model spring index];
-    rest_length, stiffness, damping : (M,) float64 in plan order; scratch : (6, M) float64.
+    rest_length, stiffness, damping : (M,) float64 in plan order; scratch : (6, C) float64.
     The kernels' sums do not depend on the order; sorting makes them fast. A model stepped
     from two threads at once would share the scratch: give each thread its own model.
     """
@@ -91,7 +92,7 @@ class SpringPlan:
         self.rest_length = _readonly(np.ascontiguousarray(model.rest_length[order]))
         self.stiffness = _readonly(np.ascontiguousarray(model.stiffness[order]))
         self.damping = _readonly(np.ascontiguousarray(model.damping[order]))
-        self.scratch = np.empty((6, len(order)))
+        self.scratch = np.empty((6, max(1, min(len(order), kernels.SPLIT_CHUNK))))
 
     def take(self, values: np.ndarray) -> np.ndarray:
         """(M,) per-spring values in model order -> a contiguous copy in plan order."""

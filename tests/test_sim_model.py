@@ -57,13 +57,20 @@ def test_elastic_only_kernel_matches(rng):
     np.testing.assert_allclose(c, b, rtol=1e-12, atol=1e-12)
 
 
-def test_split_kernels_match_fused_in_any_spring_order(rng):
+@pytest.mark.parametrize("chunk", [None, 1, 5])
+def test_split_kernels_match_fused_in_any_spring_order(rng, chunk):
     """The split passes (gather, arithmetic, scatter by runs) give the fused loop's sums for
-    springs in random order and orientation, and the plan puts them back in model order."""
+    springs in random order and orientation, and the plan puts them back in model order; also
+    when the passes run in chunks narrower than a run of springs sharing a first node."""
     model = random_model(rng)
     x = model.rest_positions + 0.1 * rng.normal(size=model.rest_positions.shape)
     v = rng.normal(size=x.shape)
     plan = model.plan
+    scratch = plan.scratch if chunk is None else np.full((6, chunk), np.nan)
+    if chunk is None:
+        assert scratch.shape == (6, min(model.spring_count, kernels.SPLIT_CHUNK))
+    else:  # the chunk boundaries must cut runs, or this case tests nothing new
+        assert np.any(plan.si[chunk::chunk] == plan.si[chunk - 1:-1:chunk])
     assert np.all(np.diff(plan.si.astype(np.int64)) >= 0) and np.all(plan.si <= plan.sj)
     pairs = np.sort(model.springs, axis=1)[plan.order]
     np.testing.assert_array_equal(pairs, np.stack([plan.si, plan.sj], axis=1))
@@ -73,7 +80,7 @@ def test_split_kernels_match_fused_in_any_spring_order(rng):
                           model.damping, fused)
     split = np.zeros_like(x)
     kernels.spring_forces_3d(x, v, plan.si, plan.sj, plan.rest_length, plan.stiffness,
-                             plan.damping, plan.scratch, split)
+                             plan.damping, scratch, split)
     np.testing.assert_allclose(split, fused, rtol=1e-11, atol=1e-11)
     # the projective-dynamics local step, split against its fused form
     h = 1 / 25
@@ -88,12 +95,12 @@ def test_split_kernels_match_fused_in_any_spring_order(rng):
                                 known, expected)
     got = np.zeros_like(x)
     kernels.pd_local_rhs_3d(x, x - x_start, plan.si, plan.sj, plan.take(weight),
-                            plan.take(damping_h), base, known_index, known, plan.scratch, got)
+                            plan.take(damping_h), base, known_index, known, scratch, got)
     np.testing.assert_allclose(got, expected, rtol=1e-11, atol=1e-11)
     # the elastic energy and the projective step's fixed right-hand side (free rows: the
     # split version leaves stray sums in known rows, which the local step overwrites)
     assert kernels.spring_energy_3d(x, plan.si, plan.sj, plan.rest_length, plan.stiffness,
-                                    plan.scratch) == pytest.approx(
+                                    scratch) == pytest.approx(
         kernels.spring_energy(x, model.springs, model.rest_length, model.stiffness), rel=1e-12)
     mask = np.zeros(len(x), dtype=bool)
     mask[known_index] = True
@@ -112,7 +119,7 @@ def test_split_kernels_match_fused_in_any_spring_order(rng):
                            model.springs[one][rows, ends].astype(np.int64),
                            model.springs[one][rows, 1 - ends].astype(np.int64),
                            (h * h * model.stiffness + damping_h)[one], model.mass, accel,
-                           free_nodes, h, 0.3, plan.scratch, got)
+                           free_nodes, h, 0.3, scratch, got)
     np.testing.assert_allclose(got[free_nodes], expected[free_nodes], rtol=1e-11, atol=1e-11)
 
 

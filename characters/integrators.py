@@ -174,11 +174,10 @@ class Integrator:
                     iterations = self._run(model, state, dt, resolved, substeps, scratch)
             except StepFailure as failure:
                 reason = str(failure)
-            if reason:
-                pass
-            elif not (kernels.all_finite(state.x) and kernels.all_finite(state.v)):
+            if not reason and not (kernels.all_finite(state.x)
+                                   and kernels.all_finite(state.v)):
                 reason = "NaN or inf in the state"
-            elif self.check_energy:
+            if not reason and self.check_energy:
                 report.energy_after = self._energy(model, state.x, state.v, scratch.x0)
                 if not report.energy_after <= limit:  # also catches a NaN energy
                     reason = (f"energy jumped from {report.energy_before:.3g} J to "
@@ -580,9 +579,9 @@ class ProjectiveDynamics(Integrator):
         omega = 1.0
         damped = bool(model.damping.any())
         split = model.dim == 3
+        plan = fac.plan if split else None
         for iteration in range(self.iterations):
             if split:
-                plan = fac.plan
                 np.subtract(x, fac.x_start, out=fac.moved)
                 kernels.pd_local_rhs_3d(x, fac.moved, plan.si, plan.sj, fac.plan_weight,
                                         fac.plan_damping_h, fac.base, fac.known_index, known,

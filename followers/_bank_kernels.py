@@ -47,8 +47,9 @@ def bank_decide(frame_loglik, xs, observed, n_obs, background_mean, background_w
         [states per frame] (time constant 1 / (1 - pace_decay) frames; starts at
         ``pace_reference``); last_position (K,) float in/out: main-track mean state last frame;
         last_main (K,) int64 in/out: each follower's main track last frame (a change: a new
-        repetition began); since_end (K,) float in/out: frames since the follower's progress last reached
-        ``end_fraction`` (its mean rarely sits on the last state itself)
+        repetition began); since_end (K,) float in/out: frames since the follower's progress
+        last reached ``end_fraction`` (its mean rarely sits on the last state itself). These
+        four are only updated when pace_weight > 0.
     end_fraction : float in (0, 1]: progress from which a follower has performed its action
     pace_floor : float > 0 [states per frame]: ``pace`` never falls below it
     pace_decay : float in [0, 1); pace_reference : float > 0 [states per frame];
@@ -73,32 +74,34 @@ def bank_decide(frame_loglik, xs, observed, n_obs, background_mean, background_w
         progress[k] = moments[k, t, 1] * scale
         variance[k] = moments[k, t, 2] * scale * scale
     if n_obs > 0:
-        for k in range(K):
-            position = progress[k] * (lengths[k] - 1)
-            step = position - last_position[k]
-            restarted = main[k] != last_main[k]
-            last_main[k] = main[k]
-            if step < 0.0:
-                # a hesitation is no evidence of advancing
-                step = 0.0
-            if progress[k] >= end_fraction:
-                since_end[k] = 0.0
-            else:
-                since_end[k] += 1.0
-            if since_end[k] <= lengths[k]:
-                # a follower that reached the end of its template has performed the whole
-                # action: holding the end pose (which often resembles the first, so a new
-                # repetition takes over) is not being stuck, for as long as the action took
-                step = pace_reference
-            last_position[k] = position
-            if restarted:
-                # a new repetition took over: it is judged afresh
-                pace[k] = pace_reference
-            pace[k] = pace_decay * pace[k] + (1.0 - pace_decay) * step
-            if pace[k] < pace_floor:
-                # bounded, so that an action that was idle for long is judged afresh within a
-                # few frames once it is performed (a switch from another action)
-                pace[k] = pace_floor
+        # the pace is only followed when it counts (pace_weight > 0: off by default)
+        if pace_weight > 0.0:
+            for k in range(K):
+                position = progress[k] * (lengths[k] - 1)
+                step = position - last_position[k]
+                restarted = main[k] != last_main[k]
+                last_main[k] = main[k]
+                if step < 0.0:
+                    # a hesitation is no evidence of advancing
+                    step = 0.0
+                if progress[k] >= end_fraction:
+                    since_end[k] = 0.0
+                else:
+                    since_end[k] += 1.0
+                if since_end[k] <= lengths[k]:
+                    # a follower that reached the end of its template has performed the whole
+                    # action: holding the end pose (which often resembles the first, so a new
+                    # repetition takes over) is not being stuck, for as long as the action took
+                    step = pace_reference
+                last_position[k] = position
+                if restarted:
+                    # a new repetition took over: it is judged afresh
+                    pace[k] = pace_reference
+                pace[k] = pace_decay * pace[k] + (1.0 - pace_decay) * step
+                if pace[k] < pace_floor:
+                    # bounded, so that an action that was idle for long is judged afresh within a
+                    # few frames once it is performed (a switch from another action)
+                    pace[k] = pace_floor
         D = observed.shape[0]
         background = 0.0
         for d in range(D):
@@ -128,7 +131,8 @@ def bank_decide(frame_loglik, xs, observed, n_obs, background_mean, background_w
         for k in range(K):
             # a performance of the action advances through its template; an input that a stretch
             # of it merely resembles (a rest pose) keeps the follower stuck there
-            penalty = pace_weight * math.log(pace[k] / pace_reference)
+            penalty = pace_weight * math.log(pace[k] / pace_reference) if pace_weight > 0.0 \
+                else 0.0
             fit[k] = likelihood_fit[k] + (penalty if penalty < 0.0 else 0.0)
         # relative to the leader: without forgetting (decay 1) the sums would drift without bound
         for k in range(K):

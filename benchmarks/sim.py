@@ -12,11 +12,12 @@ thick, ~4.5 springs per mass). The hand holds the neck (the lowest nodes, pinned
 it: 2 cm at 3 Hz sideways, 1 cm at 2 Hz up and down (fading in over 0.5 s), under gravity.
 
 The default integrator is projective dynamics, 8 iterations with Chebyshev acceleration
-(characters.default_integrator). Printed per mesh and integrator: ms per 1/25 s and 1/60 s frame (median, p90), RMS deviation
-from a converged reference (explicit Verlet with steps 4x below its stability limit and the
-hand sampled at every one of them), the
-speed ratio to a plain NumPy explicit integrator in the same process, and the force pass in
-springs per second. A picture of the deviation over time goes to docs/img/sim_shaken_head.png.
+(characters.default_integrator). Printed per mesh and integrator: ms per 1/25 s and 1/60 s
+frame (median, p90), RMS deviation from a converged reference (explicit Verlet with steps 4x
+below its stability limit and the hand sampled at every one of them), the speed ratio to a
+plain NumPy explicit integrator in the same process, and the force pass in springs per second;
+for the default integrator also the time of one global solve, measured right after its run.
+A picture of the deviation over time goes to docs/img/sim_shaken_head.png.
 """
 from __future__ import annotations
 
@@ -182,6 +183,21 @@ def force_pass_rate(model, repeats=200) -> tuple[float, float, float]:
     return rates[0], rates[1], rates[2]
 
 
+def global_solve_ms(integrator, model, repeats=50) -> float:
+    """Median ms of one prefactored global solve (x, y, z together) of a ProjectiveDynamics
+    integrator that has stepped `model`: the part of a frame that slows down most when the
+    host contends for cache and memory bandwidth (1.1-1.3 M nonzeros at 30k, by ordering)."""
+    factorisation = integrator._factors[model][1]
+    rhs = np.array(factorisation.rhs)
+    out = np.empty_like(rhs)
+    times = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        factorisation.solver.solve(rhs, out)
+        times.append(time.perf_counter() - start)
+    return float(np.median(times)) * 1e3
+
+
 def numpy_explicit_ms(model, dt, frames, pins) -> float:
     """ms per frame of the plain NumPy explicit integrator at its stable substeps (a few
     frames timed)."""
@@ -310,6 +326,10 @@ def main(argv=None) -> int:
                 rows.append((label, model.node_count, model.spring_count, f"{rate} fps {name}",
                              float(np.median(ms)), float(np.percentile(ms, 90)), rms,
                              numpy_ms / np.median(ms), failures))
+                if name.startswith("projective (default"):
+                    print(f"   {rate} fps   of which {integrator.iterations} global solves, "
+                          f"{global_solve_ms(integrator, model):.2f} ms each (median, timed "
+                          f"after the run)", flush=True)
         if paper_nodes:
             print(f"   (the paper's row: {paper_nodes} masses; ours differs by "
                   f"{model.node_count - paper_nodes:+d})")

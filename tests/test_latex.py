@@ -218,13 +218,18 @@ def test_stiffer_foam_opens_less(bunny):
     stiff_foam = replace(material("latex_foam"), youngs_modulus=2.0e6)
     stiff = LatexPuppet.from_mesh(_pybullet("bunny.obj"), masses=400,
                                   materials={"foam": stiff_foam})
+    # compared once both have settled (mean over frames 100-150): the stiff puppet rings for
+    # ~3 s, and at frame 25 the two spreads were within 0.02 % of each other
     spread = []
     for q in (bunny, stiff):
         q.reset()
-        for _ in range(25):
+        widths = []
+        for frame in range(150):
             q.step(DT, {finger: 1.0 for finger in FINGERS})
-        spread.append(np.ptp(q.surface()[:, 1]))
-    assert spread[1] < spread[0]
+            if frame >= 100:
+                widths.append(np.ptp(q.surface()[:, 1]))
+        spread.append(np.mean(widths))
+    assert spread[1] < spread[0] - 0.003
     bunny.reset()
 
 

@@ -219,7 +219,7 @@ def test_stiffer_foam_opens_less(bunny):
     stiff = LatexPuppet.from_mesh(_pybullet("bunny.obj"), masses=400,
                                   materials={"foam": stiff_foam})
     # compared once both have settled (mean over frames 100-150): the stiff puppet rings for
-    # ~3 s, and at frame 25 the two spreads were within 0.02 % of each other
+    # about 4 s, and at frame 25 the two spreads were within 0.02 % of each other
     spread = []
     for q in (bunny, stiff):
         q.reset()

@@ -577,8 +577,8 @@ class ProjectiveDynamics(Integrator):
         direct = x.flags.c_contiguous and not chebyshev
         rho2 = self.chebyshev_rho ** 2 if chebyshev else 0.0
         omega = 1.0
-        damped = bool(model.damping.any())
         split = model.dim == 3
+        damped = not split and bool(model.damping.any())  # the 2D kernels' choice only
         plan = fac.plan if split else None
         for iteration in range(self.iterations):
             if split:

@@ -11,17 +11,71 @@ import numba as nb
 import numpy as np
 
 
+@nb.njit(cache=True, fastmath={"reassoc", "contract"})
+def outline_step(xs, observed, n_obs, mean, inv_var, log_norm, cap, alpha, scratch, frame_ll,
+                 total_ll, fresh):
+    """One frame of every action's outline model: a left-to-right HMM of S states (stay or move
+    on with probability 0.5 each, the last state absorbing), one diagonal Gaussian per state.
+
+    xs (D,) float, observed (D,) float, n_obs: the cleaned frame (see ``_kernels.prepare_frame``;
+        n_obs = 0 only predicts); mean, inv_var, log_norm (K, S, D) float: each state's mean,
+        1 / variance and -0.5 log(2 pi variance); cap: squared z-scores are capped at it
+    alpha (K, S) float in/out: normalised forward variables; scratch (S,) float
+    frame_ll (K,) float out: log-likelihood of this frame given the past (0 when n_obs = 0);
+    total_ll (K,) float in/out: its sum since reset
+    fresh (1,) bool in/out: True until the first frame, which the first state emits (the reset
+        puts alpha there) without a transition before it
+    """
+    K, S, D = mean.shape
+    predict = not fresh[0]
+    fresh[0] = False
+    for k in range(K):
+        # predict, from the last state down so that alpha[s - 1] is still the old value
+        if predict and S > 1:
+            alpha[k, S - 1] += 0.5 * alpha[k, S - 2]
+            for s in range(S - 2, 0, -1):
+                alpha[k, s] = 0.5 * (alpha[k, s] + alpha[k, s - 1])
+            alpha[k, 0] *= 0.5
+        if n_obs == 0:
+            frame_ll[k] = 0.0
+            continue
+        top = -np.inf
+        for s in range(S):
+            b = 0.0
+            for d in range(D):
+                # branch-free, so that the compiler vectorises it (missing channels: xs 0,
+                # observed 0)
+                diff = xs[d] - mean[k, s, d]
+                z2 = min(diff * diff * inv_var[k, s, d], cap)
+                b += observed[d] * (log_norm[k, s, d] - 0.5 * z2)
+            scratch[s] = b
+            if alpha[k, s] > 0.0 and b > top:
+                top = b
+        total = 0.0
+        for s in range(S):
+            v = alpha[k, s] * math.exp(scratch[s] - top) if alpha[k, s] > 0.0 else 0.0
+            alpha[k, s] = v
+            total += v
+        for s in range(S):
+            alpha[k, s] /= total
+        frame_ll[k] = math.log(total) + top
+        total_ll[k] += frame_ll[k]
+
+
 @nb.njit(cache=True)
-def bank_decide(frame_loglik, xs, observed, n_obs, background_mean, background_weight,
-                background_log_norm, cap, decay, fit_decay, evidence_cap, lead_cap, fit_floor,
-                recent, fit, likelihood_fit, fit_weight, pace, last_position, last_main,
-                since_end, end_fraction, pace_floor, pace_decay,
+def bank_decide(frame_loglik, outline_ll, outline_weight, xs, observed, n_obs, background_mean,
+                background_weight, background_log_norm, cap, decay, fit_decay, evidence_cap,
+                lead_cap, fit_floor, recent, fit, likelihood_fit, fit_weight, pace,
+                last_position, last_main, since_end, end_fraction, pace_floor, pace_decay,
                 pace_reference, pace_weight, posterior, thresholds, enter_margin, leave_margin,
                 switch_margin, state, moments, main, lengths, progress, variance):
     """Update the bank's decision after one frame.
 
     frame_loglik (2, K) float: each follower's log-likelihood of this frame under its own
         emission model (row 0) and its recognition model (row 1, what the bank uses)
+    outline_ll (K,) float, outline_weight : float >= 0: each action's outline-model frame
+        log-likelihood (``outline_step``) and its weight in the posterior's evidence (not in
+        ``fit``: the rejection compares the followers alone with the background)
     xs (D,) float: the cleaned frame; observed (D,) float: 1 or 0 (see ``_kernels.prepare_frame``)
     n_obs : int: observed channels this frame (0: the frame says nothing, nothing changes)
     background_mean, background_weight, background_log_norm (D,) float: the background model, one
@@ -111,14 +165,15 @@ def bank_decide(frame_loglik, xs, observed, n_obs, background_mean, background_w
                 background += background_log_norm[d] - 0.5 * (v if v < cap else cap)
         fit_weight[0] = fit_decay * fit_weight[0] + 1.0
         inv_w = 1.0 / fit_weight[0]
-        frame_best = frame_loglik[1, 0]
-        for k in range(1, K):
-            if frame_loglik[1, k] > frame_best:
-                frame_best = frame_loglik[1, k]
+        frame_best = -np.inf
+        for k in range(K):
+            score = frame_loglik[1, k] + outline_weight * outline_ll[k]
+            if score > frame_best:
+                frame_best = score
         leader = -np.inf
         for k in range(K):
             value = frame_loglik[1, k]
-            evidence = value - frame_best
+            evidence = value + outline_weight * outline_ll[k] - frame_best
             if evidence < -evidence_cap:
                 evidence = -evidence_cap
             recent[k] = decay * recent[k] + evidence

@@ -450,3 +450,40 @@ def test_bank_pace_term_rejects_a_pose_held_from_the_middle_of_an_action(rng, ac
     for bad in (-1.0, float("nan"), float("inf")):
         with pytest.raises(ValueError, match="pace_weight must be a finite number >= 0"):
             FollowerBank(actions, pace_weight=bad)
+
+
+def test_bank_outline_model_matches_hmmlearn_and_feeds_the_evidence(rng, actions):
+    """Each action's outline model (10 states over equal stretches of its template, 0.5 stay /
+    0.5 next, the last absorbing) is the HMM hmmlearn scores with the same parameters, and its
+    weight moves the posterior's evidence, not the rejection's fit. (Without the outlier cap,
+    which hmmlearn does not have, on input that no model explains thousands of nats worse than
+    another: the kernel scales each frame by its best state, as the followers do.)"""
+    from hmmlearn import hmm
+
+    from followers.bank import OUTLINE_FLOOR, OUTLINE_OWN_VARIANCE
+
+    templates = {"nod": actions["nod"], "slower nod": time_warp(actions["nod"], 0.7)[0],
+                 "shifted nod": actions["nod"] + 0.5}
+    bank = FollowerBank(templates, outlier_sigmas=1e6)
+    X = time_warp(actions["nod"], 1.3)[0]
+    X = X + rng.normal(scale=0.3, size=X.shape)
+    trace = bank.follow(X)
+    spread = np.concatenate(list(templates.values())).std(axis=0)
+    for k, name in enumerate(bank.actions):
+        template = templates[name]
+        stretches = np.array_split(np.arange(len(template)), 10)
+        model = hmm.GaussianHMM(n_components=10, covariance_type="diag", init_params="",
+                                params="")
+        model.startprob_ = np.eye(10)[0]
+        model.transmat_ = 0.5 * (np.eye(10) + np.eye(10, k=1))
+        model.transmat_[-1, -1] = 1.0
+        model.means_ = np.stack([template[r].mean(axis=0) for r in stretches])
+        model.covars_ = np.stack([template[r].var(axis=0) for r in stretches]) + (
+            OUTLINE_OWN_VARIANCE * template.var(axis=0) + OUTLINE_FLOOR * spread ** 2)
+        assert bank.outline_log_likelihoods[k] == pytest.approx(model.score(X), rel=1e-9)
+    # the weight: 0 leaves the fit alone and changes the evidence
+    plain = FollowerBank(templates, outlier_sigmas=1e6, outline_weight=0.0).follow(X)
+    np.testing.assert_allclose(plain["fits"], trace["fits"], rtol=1e-12)
+    assert np.abs(plain["posteriors"] - trace["posteriors"]).max() > 1e-3
+    with pytest.raises(ValueError, match="outline_weight must be a finite number >= 0"):
+        FollowerBank(templates, outline_weight=-1.0)

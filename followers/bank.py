@@ -423,7 +423,8 @@ class FollowerBank:
 
     @property
     def recent_log_likelihoods(self) -> np.ndarray:
-        """(K,) float <= 0: sum of frame log-likelihoods relative to each frame's best follower,
+        """(K,) float <= 0: sum of frame scores (recognition log-likelihood plus ``outline_weight``
+        times the outline model's) relative to each frame's best action,
         bounded (see ``memory``), forgotten with time constant ``memory``, leader at 0."""
         return self._recent
 

@@ -12,10 +12,11 @@ import numpy as np
 
 
 @nb.njit(cache=True, fastmath={"reassoc", "contract"})
-def outline_step(xs, observed, n_obs, mean, inv_var, log_norm, cap, alpha, scratch, frame_ll,
-                 total_ll, fresh):
+def outline_step(xs, observed, n_obs, mean, inv_var, log_norm, cap, restart, alpha, scratch,
+                 frame_ll, total_ll, fresh):
     """One frame of every action's outline model: a left-to-right HMM of S states (stay or move
-    on with probability 0.5 each, the last state absorbing), one diagonal Gaussian per state.
+    on with probability 0.5 each, the last state absorbing; then, with probability ``restart``,
+    back to the first state: a new repetition), one diagonal Gaussian per state.
 
     xs (D,) float, observed (D,) float, n_obs: the cleaned frame (see ``_kernels.prepare_frame``;
         n_obs = 0 only predicts); mean, inv_var, log_norm (K, S, D) float: each state's mean,
@@ -36,6 +37,10 @@ def outline_step(xs, observed, n_obs, mean, inv_var, log_norm, cap, alpha, scrat
             for s in range(S - 2, 0, -1):
                 alpha[k, s] = 0.5 * (alpha[k, s] + alpha[k, s - 1])
             alpha[k, 0] *= 0.5
+            # a new repetition (or an action taken up after another one) can begin at any frame
+            for s in range(S):
+                alpha[k, s] *= 1.0 - restart
+            alpha[k, 0] += restart
         if n_obs == 0:
             frame_ll[k] = 0.0
             continue

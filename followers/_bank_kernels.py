@@ -12,6 +12,20 @@ import numpy as np
 
 
 @nb.njit(cache=True, fastmath={"reassoc", "contract"})
+def capped_log_density(xs, observed, mean, inv_var, log_norm, cap):
+    """log of a diagonal Gaussian at the cleaned frame ``xs (D,)``, over its observed channels
+    (``observed (D,)`` 1 or 0; missing channels have xs 0), each squared z-score capped at
+    ``cap``; mean, inv_var, log_norm (D,) float: mean, 1 / variance, -0.5 log(2 pi variance).
+    Branch-free, so that the compiler vectorises it."""
+    total = 0.0
+    for d in range(xs.shape[0]):
+        diff = xs[d] - mean[d]
+        z2 = min(diff * diff * inv_var[d], cap)
+        total += observed[d] * (log_norm[d] - 0.5 * z2)
+    return total
+
+
+@nb.njit(cache=True, fastmath={"reassoc", "contract"})
 def outline_step(xs, observed, n_obs, mean, inv_var, log_norm, cap, restart, alpha, scratch,
                  frame_ll, total_ll, fresh):
     """One frame of every action's outline model: a left-to-right HMM of S states (stay or move
@@ -27,7 +41,7 @@ def outline_step(xs, observed, n_obs, mean, inv_var, log_norm, cap, restart, alp
     fresh (1,) bool in/out: True until the first frame, which the first state emits (the reset
         puts alpha there) without a transition before it
     """
-    K, S, D = mean.shape
+    K, S = alpha.shape
     predict = not fresh[0]
     fresh[0] = False
     for k in range(K):
@@ -46,13 +60,7 @@ def outline_step(xs, observed, n_obs, mean, inv_var, log_norm, cap, restart, alp
             continue
         top = -np.inf
         for s in range(S):
-            b = 0.0
-            for d in range(D):
-                # branch-free, so that the compiler vectorises it (missing channels: xs 0,
-                # observed 0)
-                diff = xs[d] - mean[k, s, d]
-                z2 = min(diff * diff * inv_var[k, s, d], cap)
-                b += observed[d] * (log_norm[k, s, d] - 0.5 * z2)
+            b = capped_log_density(xs, observed, mean[k, s], inv_var[k, s], log_norm[k, s], cap)
             scratch[s] = b
             if alpha[k, s] > 0.0 and b > top:
                 top = b
@@ -161,13 +169,8 @@ def bank_decide(frame_loglik, outline_ll, outline_weight, xs, observed, n_obs, b
                     # bounded, so that an action that was idle for long is judged afresh within a
                     # few frames once it is performed (a switch from another action)
                     pace[k] = pace_floor
-        D = observed.shape[0]
-        background = 0.0
-        for d in range(D):
-            if observed[d] > 0.0:
-                diff = xs[d] - background_mean[d]
-                v = background_weight[d] * diff * diff
-                background += background_log_norm[d] - 0.5 * (v if v < cap else cap)
+        background = capped_log_density(xs, observed, background_mean, background_weight,
+                                        background_log_norm, cap)
         fit_weight[0] = fit_decay * fit_weight[0] + 1.0
         inv_w = 1.0 / fit_weight[0]
         frame_best = -np.inf

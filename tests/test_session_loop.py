@@ -192,9 +192,18 @@ def reference_over(dst, src):
     return out
 
 
+def with_edge_alphas(rng, image):
+    """Set about a third of the pixels' alpha to 0 and a third to 255 (the branches a
+    compiled blend takes), the rest stays random."""
+    pick = rng.integers(0, 3, image.shape[:2])
+    image[..., 3][pick == 0] = 0
+    image[..., 3][pick == 1] = 255
+    return image
+
+
 def test_blend_over_matches_porter_duff_and_clips(rng):
-    canvas = rng.integers(0, 256, (12, 16, 4), dtype=np.uint8)
-    layer = rng.integers(0, 256, (5, 7, 4), dtype=np.uint8)
+    canvas = with_edge_alphas(rng, rng.integers(0, 256, (12, 16, 4), dtype=np.uint8))
+    layer = with_edge_alphas(rng, rng.integers(0, 256, (5, 7, 4), dtype=np.uint8))
     expected = canvas.astype(float).copy()
     expected[3:8, -4:] = reference_over(canvas[3:8, -4:], layer[:, :4])
     blend_over(canvas, layer, 12, 3)            # the right part of the layer is off-canvas
@@ -211,12 +220,28 @@ def test_blend_over_matches_porter_duff_and_clips(rng):
 def test_opaque_fast_path_matches_general_path(rng):
     canvas = rng.integers(0, 256, (20, 30, 4), dtype=np.uint8)
     canvas[..., 3] = 255
-    layer = rng.integers(0, 256, (9, 11, 4), dtype=np.uint8)
+    layer = with_edge_alphas(rng, rng.integers(0, 256, (9, 11, 4), dtype=np.uint8))
     fast, general = canvas.copy(), canvas.copy()
     blend_over(fast, layer, -3, 14, opaque=True)
     blend_over(general, layer, -3, 14)
     assert np.abs(fast.astype(int) - general.astype(int)).max() <= 1
     assert (fast[..., 3] == 255).all()
+
+
+def test_opaque_blend_is_the_rounded_integer_mix_byte_for_byte(rng):
+    canvas = rng.integers(0, 256, (60, 80, 4), dtype=np.uint8)
+    canvas[..., 3] = 255
+    layer = with_edge_alphas(rng, rng.integers(0, 256, (50, 40, 4), dtype=np.uint8))
+    alpha = layer[..., 3:4].astype(np.int64)
+    expected = canvas.copy()
+    region = expected[7:57, 30:70, :3].astype(np.int64)
+    expected[7:57, 30:70, :3] = (layer[..., :3] * alpha + region * (255 - alpha) + 127) // 255
+    blend_over(canvas, layer, 30, 7, opaque=True)
+    assert np.array_equal(canvas, expected)
+    with pytest.raises(ValueError, match="uint8"):
+        blend_over(canvas, layer.astype(np.float32), 0, 0)
+    with pytest.raises(ValueError, match="RGBA"):
+        blend_over(canvas, layer[..., :3].copy(), 0, 0)
 
 
 class SlowRenderer:

@@ -472,12 +472,12 @@ class _Factorisation:
             self.couple_free = np.ascontiguousarray(pairs[rows, ends], dtype=np.int64)
             self.couple_known = np.ascontiguousarray(pairs[rows, 1 - ends], dtype=np.int64)
             self.couple = np.ascontiguousarray(spring[one_known])
+            self.start_damping = np.zeros((3, model.spring_count))  # h c e0, plan order
         self.base = np.zeros((n, d))
         self.rhs = np.zeros((n, d))
         self.solved = np.zeros((n, d))
         self.previous = np.zeros((n, d))
         self.x_start = np.zeros((n, d))
-        self.moved = np.zeros((n, d))
         self.v_start = np.zeros((n, d))
         self.known_positions = np.zeros((n, d))
         self.accel = np.zeros((n, d))
@@ -557,7 +557,7 @@ class ProjectiveDynamics(Integrator):
             kernels.pd_base_rhs_3d(fac.x_start, fac.v_start, known, plan.si, plan.sj,
                                    fac.plan_damping_h, fac.couple_free, fac.couple_known,
                                    fac.couple, model.mass, accel, fac.free_nodes, h,
-                                   model.velocity_damping, plan.scratch, fac.base)
+                                   model.velocity_damping, fac.base, fac.start_damping)
         else:
             kernels.pd_base_rhs(fac.x_start, fac.v_start, known, model.springs, model.stiffness,
                                 model.damping, model.mass, accel, fac.free_nodes, fac.free_id,
@@ -582,9 +582,8 @@ class ProjectiveDynamics(Integrator):
         plan = fac.plan if split else None
         for iteration in range(self.iterations):
             if split:
-                np.subtract(x, fac.x_start, out=fac.moved)
-                kernels.pd_local_rhs_3d(x, fac.moved, plan.si, plan.sj, fac.plan_weight,
-                                        fac.plan_damping_h, fac.base, fac.known_index, known,
+                kernels.pd_local_rhs_3d(x, plan.si, plan.sj, fac.plan_weight,
+                                        fac.start_damping, fac.base, fac.known_index, known,
                                         plan.scratch, fac.rhs)
             elif damped:
                 kernels.pd_local_rhs_damped(x, fac.x_start, model.springs, fac.weight,

@@ -153,14 +153,14 @@ def _damped_magnitudes(ex, ey, ez, vx, vy, vz, rest, k, c):
 
 
 # what _split_passes computes per spring between its gather and its scatter
-_DAMPED, _ELASTIC, _PROJECTION, _DAMPER = 0, 1, 2, 3
+_DAMPED, _ELASTIC = 0, 1
 
 
 @njit(**_JIT)
 def _split_passes(x, y, si, sj, p, q, r, kind, scratch, out):
     """Gather, per-spring arithmetic `kind`, scatter into out (N, 3), chunk by chunk of
-    scratch.shape[1] springs. y (N, 3) is gathered too for _DAMPED (velocities) and _PROJECTION
-    (moves); p, q, r (M,) are the per-spring arrays of that kind, in plan order."""
+    scratch.shape[1] springs. y (N, 3) is gathered too for _DAMPED (velocities); p, q, r (M,)
+    are the per-spring arrays of that kind, in plan order."""
     m = si.shape[0]
     chunk = scratch.shape[1]
     for s0 in range(0, m, chunk):
@@ -171,20 +171,11 @@ def _split_passes(x, y, si, sj, p, q, r, kind, scratch, out):
         a = si[s0:s1]
         b = sj[s0:s1]
         gather_rows(x, a, b, ex, ey, ez)
-        if kind == _DAMPED or kind == _PROJECTION:
-            gather_rows(y, a, b, wx, wy, wz)
         if kind == _DAMPED:
+            gather_rows(y, a, b, wx, wy, wz)
             _damped_magnitudes(ex, ey, ez, wx, wy, wz, p[s0:s1], q[s0:s1], r[s0:s1])
-        elif kind == _ELASTIC:
+        else:
             _elastic_magnitudes(ex, ey, ez, p[s0:s1], q[s0:s1])
-        elif kind == _PROJECTION:
-            _pd_projections(ex, ey, ez, wx, wy, wz, p[s0:s1], q[s0:s1])
-        else:  # _DAMPER: h c (x_i - x_j) on i, its negative on j
-            for s in range(n):
-                hc = p[s0 + s]
-                ex[s] *= -hc
-                ey[s] *= -hc
-                ez[s] *= -hc
         scatter_rows(a, b, ex, ey, ez, out)
 
 
@@ -665,40 +656,57 @@ def pd_local_rhs_damped(x, x_start, springs, weight, damping_h, base, known_inde
 
 
 @njit(**_JIT)
-def _pd_projections(ex, ey, ez, wx, wy, wz, weight, damping_h):
-    """e := -(weight e / l + h c (w - (w . e) e / l^2)) in place, e = (ex, ey, ez), w = (wx,
-    wy, wz) rows (M,) of the scratch: minus what pd_local_rhs_damped adds to node j
-    (scatter_rows adds f to i and takes it from j)."""
+def _pd_projections(ex, ey, ez, gx, gy, gz, weight):
+    """e := -(weight / l + (g . e) / l^2) e in place, e = (ex, ey, ez), g = (gx, gy, gz) rows
+    (M,): minus what pd_local_rhs_3d adds to node j (scatter_rows adds f to i, takes it from
+    j)."""
     for s in range(ex.shape[0]):
         length2 = ex[s] * ex[s] + ey[s] * ey[s] + ez[s] * ez[s]
         if length2 > 0.0:
             inv2 = 1.0 / length2
-            hc = damping_h[s]
-            c = weight[s] * np.sqrt(inv2) - hc * (ex[s] * wx[s] + ey[s] * wy[s]
-                                                   + ez[s] * wz[s]) * inv2
-            ex[s] = -(c * ex[s] + hc * wx[s])
-            ey[s] = -(c * ey[s] + hc * wy[s])
-            ez[s] = -(c * ez[s] + hc * wz[s])
+            mag = -(weight[s] * np.sqrt(inv2)
+                    + (gx[s] * ex[s] + gy[s] * ey[s] + gz[s] * ez[s]) * inv2)
         else:
-            ex[s] = 0.0
-            ey[s] = 0.0
-            ez[s] = 0.0
+            mag = 0.0
+        ex[s] *= mag
+        ey[s] *= mag
+        ez[s] *= mag
 
 
 @njit(**_JIT)
-def pd_local_rhs_3d(x, moved, si, sj, weight, damping_h, base, known_index, known, scratch,
-                    out):
-    """pd_local_rhs_damped for 3D models in split passes (weight, damping_h in plan order);
-    moved (N, 3) [m] = x - x_start, computed by the caller."""
+def pd_local_rhs_3d(x, si, sj, weight, start_damping, base, known_index, known, scratch, out):
+    """pd_local_rhs_damped for 3D models in split passes, with base from pd_base_rhs_3d.
+
+    weight (M,) in plan order; start_damping (3, M) [kg m] = h c_s (x0_j - x0_i), the step's
+    start edges, from pd_base_rhs_3d. With w = e - e0 (e = x_j - x_i, e0 its value at the
+    step's start) the transverse damping h c (w - (w . u) u) equals h c ((e0 . u) u - e0): its
+    constant part -h c e0 cancels the isotropic damper term h c (x0_j - x0_i) of the fused
+    base, which pd_base_rhs_3d leaves out, so each iteration adds only
+    (weight / l + (h c e0 . e) / l^2) e per spring: one gather of x, no moves.
+    """
     out[...] = base
-    _split_passes(x, moved, si, sj, weight, damping_h, damping_h, _PROJECTION, scratch, out)
+    m = si.shape[0]
+    chunk = scratch.shape[1]
+    gx, gy, gz = start_damping[0], start_damping[1], start_damping[2]
+    for s0 in range(0, m, chunk):
+        s1 = min(s0 + chunk, m)
+        n = s1 - s0
+        ex, ey, ez = scratch[0][:n], scratch[1][:n], scratch[2][:n]
+        a = si[s0:s1]
+        b = sj[s0:s1]
+        gather_rows(x, a, b, ex, ey, ez)
+        _pd_projections(ex, ey, ez, gx[s0:s1], gy[s0:s1], gz[s0:s1], weight[s0:s1])
+        scatter_rows(a, b, ex, ey, ez, out)
     _set_known_rows(known_index, known, out)
 
 
 @njit(**_JIT)
 def pd_base_rhs_3d(x0, v0, known, si, sj, damping_h, couple_free, couple_known, couple,
-                   mass, accel, free_nodes, h, velocity_damping, scratch, out):
-    """pd_base_rhs for 3D models in split passes (free_id is the identity on free nodes here).
+                   mass, accel, free_nodes, h, velocity_damping, out, start_damping):
+    """The fixed right-hand side of a 3D step for pd_local_rhs_3d (free_id is the identity on
+    free nodes here): pd_base_rhs without the isotropic damper term, which cancels against the
+    local step's transverse damping, and start_damping (3, M) = h c (x0_j - x0_i) in plan
+    order for the local step.
 
     Rows of known nodes receive stray sums: the local step overwrites them. damping_h (M,)
     = h c in plan order; couple_free, couple_known (B,) int64 [node], couple (B,) [kg]: the
@@ -711,7 +719,13 @@ def pd_base_rhs_3d(x0, v0, known, si, sj, damping_h, couple_free, couple_known, 
         for a in range(3):
             y = x0[i, a] + h * v0[i, a] + h * h * accel[i, a]
             out[i, a] = m * y + h * velocity_damping * m * x0[i, a]
-    _split_passes(x0, x0, si, sj, damping_h, damping_h, damping_h, _DAMPER, scratch, out)
+    gx, gy, gz = start_damping[0], start_damping[1], start_damping[2]
+    gather_rows(x0, si, sj, gx, gy, gz)
+    for s in range(si.shape[0]):
+        hc = damping_h[s]
+        gx[s] *= hc
+        gy[s] *= hc
+        gz[s] *= hc
     for b in range(couple_free.shape[0]):
         i = couple_free[b]
         j = couple_known[b]

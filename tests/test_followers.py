@@ -278,6 +278,36 @@ def test_wrong_dimension_frame_names_expected_and_given(rng):
         follower.follow(np.zeros((10, 5)))
 
 
+@pytest.mark.parametrize("prior", ["uniform", "log-uniform"])
+def test_held_pose_advances_at_the_speed_priors_mean(prior):
+    """Where the input says nothing (a flat stretch), progress is the prior's expected travel:
+    sum over frames of the mean speed, the level distribution moved by the jitter each frame.
+    Over 0.4-2.5x a prior flat in speed starts at a mean of 1.55x (levels weighted by their
+    speed), one flat in log speed at 1.18x (levels equally likely)."""
+    model = transition_model("speed", speed_prior=prior, restart=0.0)
+    speeds = np.geomspace(0.4, 2.5, 11)
+    weights = speeds if prior == "uniform" else np.ones(11)
+    np.testing.assert_allclose(model.speeds, speeds)
+    np.testing.assert_allclose(model.initial_speed, weights / weights.sum())
+    assert model.initial_speed @ model.speeds == pytest.approx(
+        {"uniform": 1.546, "log-uniform": 1.176}[prior], abs=1e-3)
+    T = 400
+    follower = Follower(np.zeros((T, 1)), sigma=1.0, window=T, transitions=model)
+    assert follower.step(np.zeros(1)).progress == 0.0  # the first frame is the first state
+    levels = model.initial_speed.copy()
+    travelled = 0.0
+    for frame in range(40):
+        shifted = levels * model.speed_change[:, 1]
+        shifted[1:] += levels[:-1] * model.speed_change[:-1, 2]
+        shifted[:-1] += levels[1:] * model.speed_change[1:, 0]
+        levels = shifted
+        travelled += levels @ model.speeds
+        out = follower.step(np.zeros(1))
+        assert out.progress * (T - 1) == pytest.approx(travelled, rel=1e-6)  # pruning: 1e-8
+    with pytest.raises(ValueError, match="speed_prior must be one of"):
+        transition_model("speed", speed_prior="fast")
+
+
 @pytest.mark.parametrize("kwargs, match", [
     ({"sigma": -1.0}, "sigma must be finite and > 0"),
     ({"sigma": np.ones(5)}, r"one value per channel \(3,\)"),

@@ -285,7 +285,17 @@ def test_default_integrator_is_projective():
     from characters import default_integrator
     integrator = default_integrator()
     assert isinstance(integrator, ProjectiveDynamics)
-    assert integrator.iterations == 8 and integrator.chebyshev_rho == 0.9
+    assert integrator.iterations is None and integrator.chebyshev_rho == 0.9
+    # 8 local/global iterations per step longer than 1/40 s, 6 per shorter one (substeps count)
+    assert [integrator.iterations_for(h) for h in (1 / 25, 1 / 30, 1 / 40, 1 / 60)] == [8, 8, 6, 6]
+    assert ProjectiveDynamics(iterations=5).iterations_for(1 / 60) == 5
+    model = MassSpring([[0.0, 0, 0], [0.1, 0, 0], [0, 0.1, 0]], [[0, 1], [1, 2], [0, 2]],
+                       stiffness=100.0, mass=0.01, gravity=(0, 0, -9.8))
+    state = model.state()
+    assert integrator.step(model, state, 1 / 25).iterations == 8
+    assert integrator.step(model, state, 1 / 60).iterations == 6
+    with pytest.raises(ValueError, match="iterations must be >= 1 or None"):
+        ProjectiveDynamics(iterations=0)
     with pytest.raises(ValueError, match="chebyshev_rho"):
         ProjectiveDynamics(chebyshev_rho=1.5)
 

@@ -330,9 +330,8 @@ def main(argv=None) -> int:
                              numpy_ms / np.median(ms), failures))
                 if name.startswith("projective (default"):
                     print(f"   {rate} fps   of which {integrator.iterations_for(dt)} global "
-                          f"solves, "
-                          f"{global_solve_ms(integrator, model):.2f} ms each (median, timed "
-                          f"after the run)", flush=True)
+                          f"solves, {global_solve_ms(integrator, model):.2f} ms each (median, "
+                          f"timed after the run)", flush=True)
         if paper_nodes:
             print(f"   (the paper's row: {paper_nodes} masses; ours differs by "
                   f"{model.node_count - paper_nodes:+d})")

@@ -296,7 +296,7 @@ def test_held_pose_advances_at_the_speed_priors_mean(prior):
     assert follower.step(np.zeros(1)).progress == 0.0  # the first frame is the first state
     levels = model.initial_speed.copy()
     travelled = 0.0
-    for frame in range(40):
+    for _ in range(40):
         shifted = levels * model.speed_change[:, 1]
         shifted[1:] += levels[:-1] * model.speed_change[:-1, 2]
         shifted[:-1] += levels[1:] * model.speed_change[1:, 0]

@@ -37,6 +37,10 @@ class ForwardEngine:
     recognition_sigmas : list of K (T_k, D) float, optional: a second emission model that only
         scores each frame (``frame_loglik[1]``) from the same predicted state distribution;
         None scores with the follower's own model
+    recognition_mixture : (weight, scale), optional, with recognition_sigmas: the recognition
+        model becomes a mixture per state, ``weight`` in (0, 1) on a Gaussian of the follower's
+        sigma times ``scale`` > 0 (not the learned scale) and ``1 - weight`` on the
+        recognition_sigmas' one
     prune : float: edge states of a track's support below this mass are dropped (0 = never)
     scale_adaptation : (memory [frames], prior [frames], lowest, highest scale) or None: learn
         each follower's emission scale online (sigma x scale, EM on one scalar per template,
@@ -46,6 +50,7 @@ class ForwardEngine:
     def __init__(self, templates: list[np.ndarray], sigmas: list[np.ndarray], windows: np.ndarray,
                  transitions: TransitionModel, *, cap: float, prune: float,
                  recognition_sigmas: list[np.ndarray] | None = None,
+                 recognition_mixture: tuple[float, float] | None = None,
                  scale_adaptation: tuple[float, float, float, float] | None = None):
         R = transitions.resolution
         if R > 1:
@@ -62,9 +67,18 @@ class ForwardEngine:
         self.offsets[1:] = np.cumsum(self.lengths)[:-1]
         self.templates = np.ascontiguousarray(np.concatenate(templates, axis=0))
         self.sigmas = np.ascontiguousarray(np.concatenate(sigmas, axis=0), dtype=np.float64)
-        # emission models: 0 drives the forward recursion, 1 only scores frames for recognition
+        # emission models: 0 drives the forward recursion, 1 (and 2, the narrow component of a
+        # recognition mixture) only score frames for recognition
         self.dual = recognition_sigmas is not None
         rec = (np.concatenate(recognition_sigmas, axis=0) if self.dual else self.sigmas)
+        self.mixture, self.exact_scale = 0.0, 1.0
+        if recognition_mixture is not None:
+            if not self.dual:
+                raise ValueError("a recognition mixture needs recognition_sigmas")
+            self.mixture, self.exact_scale = (float(v) for v in recognition_mixture)
+            if not (0.0 < self.mixture < 1.0 and self.exact_scale > 0.0):
+                raise ValueError(f"a recognition mixture needs a weight in (0, 1) and a scale "
+                                 f"> 0, got {recognition_mixture}")
         both = np.stack([self.sigmas, np.asarray(rec, dtype=np.float64)])
         self.weights = np.ascontiguousarray(1.0 / both ** 2)
         self.state_log_norm = np.ascontiguousarray(-0.5 * np.log(2.0 * np.pi * both ** 2))
@@ -95,7 +109,7 @@ class ForwardEngine:
         M = transitions.levels
         self.alpha = np.zeros((2, S, M))
         self.rowsum = np.zeros((2, S))
-        self.logb = np.zeros((2, S))
+        self.logb = np.zeros((3, S))
         self.support = np.zeros((K, 2, 2), dtype=np.int64)
         self.moments = np.zeros((K, 2, 3))
         self.main = np.zeros(K, dtype=np.int64)
@@ -149,7 +163,7 @@ class ForwardEngine:
         return _kernels.bank_step(
             x, self.lower, self.upper, self.templates, self.offsets, self.lengths,
             self.half_windows, self.weights, self.state_log_norm, self.state_log_norm_sum,
-            self.cap, self.dual, self.prune,
+            self.cap, self.dual, self.mixture, self.exact_scale, self.prune,
             self.advance, self.advance_tail, self.advance_range, self.speed_change,
             self.initial_speed, self.restart,
             self.alpha, self.rowsum, self.logb, self.support, self.moments, self.main, self.fresh,
@@ -167,7 +181,7 @@ class ForwardEngine:
         _kernels.follow_sequence(
             X, self.lower, self.upper, self.templates, self.offsets, self.lengths,
             self.half_windows, self.weights, self.state_log_norm, self.state_log_norm_sum,
-            self.cap, self.dual, self.prune,
+            self.cap, self.dual, self.mixture, self.exact_scale, self.prune,
             self.advance, self.advance_tail, self.advance_range, self.speed_change,
             self.initial_speed, self.restart,
             self.alpha, self.rowsum, self.logb, self.support, self.moments, self.main, self.fresh,

@@ -13,7 +13,9 @@ Layout shared by every kernel (K templates stacked, ``S = sum(T_k)`` states in a
 - ``main (K,) int64``: which track (0 or 1) is the main one; ``fresh (K,) bool``: no frame yet.
 - ``loglik (K,) float64``: log-likelihood of everything since reset; ``frame_loglik (2, K)``:
   of the last frame alone, under the follower's emission model (row 0) and under the bank's
-  recognition model (row 1; a copy of row 0 unless ``dual``).
+  recognition model (row 1; a copy of row 0 unless ``dual``). With ``mixture = w > 0`` the
+  recognition model is a two-component mixture per state: weight ``w`` on model 2 (the narrow
+  one: an exact repetition) and ``1 - w`` on model 1 (another performance).
 - ``adapt (3,) float64``: [forgetting factor, lowest, highest scale**2] of the emission scale
   learned online (factor 0: fixed); ``scale2 (K,)``: each template's current scale**2, which
   multiplies model 0's sigma**2; ``scale_weight (K,)``: the forgetful count behind it;
@@ -21,10 +23,12 @@ Layout shared by every kernel (K templates stacked, ``S = sum(T_k)`` states in a
 
 The emission of state ``j`` is ``sum over observed channels d`` of
 ``-0.5 * min(w[e, j, d] * (x[d] - template[j, d])**2, cap) - 0.5 * log(2 pi sigma[e, j, d]**2)``
-with ``w = 1 / sigma**2``, sigma per model ``e`` (0: the follower's, 1: recognition), state and
-channel: ``weights, log_norm (2, S, D)``. ``cap = inf`` is the plain Gaussian of the paper
-(equation 1); a finite cap bounds what one wild channel can do. Each frame is scaled by the
-largest emission, so nothing under- or overflows however long the run.
+with ``w = 1 / sigma**2``, sigma per model ``e`` (0: the follower's, 1: recognition, 2: the
+recognition mixture's narrow component: model 0's sigma, unscaled, times ``exact_scale``),
+state and channel: ``weights, log_norm (2, S, D)``.
+``cap = inf`` is the plain Gaussian of the paper (equation 1); a finite cap bounds what one wild
+channel can do. Each frame is scaled by the largest emission, so nothing under- or overflows
+however long the run.
 
 Windowing (MOP equations 6-7): before each transition a track keeps only the states within
 ``p`` of its rounded mean (shifted to stay inside the template); the mass outside is dropped and
@@ -65,16 +69,21 @@ def prepare_frame(x, lower, upper, xs, observed):
 
 @nb.njit(cache=True, fastmath={"reassoc", "contract"})
 def _emission_rows(templates, weights, log_norm, log_norm_sum, first, last, xs, observed,
-                   all_observed, cap, dual, inv_scale2, norm_shift, out, residual):
+                   all_observed, cap, dual, inv_scale2, norm_shift, exact_scale2, exact_shift,
+                   out, residual):
     # out[e, j] = sum over observed d of -0.5 * min(w[e, j, d] * (x[d] - template[j, d])**2, cap)
     #             + log_norm[e, j, d], for rows first..last; e = 0 the follower's model, whose
     #             sigma is multiplied by the online scale (w / scale**2; norm_shift =
     #             -n_obs * log(scale)), e = 1 the recognition model (only when dual, else a copy
-    #             of e = 0). residual[j]: the capped sum of squared z-scores of model 0.
+    #             of e = 0), e = 2 the narrow component of the recognition mixture: model 0's
+    #             sigma without the online scale, divided by sqrt(exact_scale2) (exact_shift =
+    #             n_obs * log(that) / 2). residual[j]: the capped sum of squared z-scores of
+    #             model 0.
     D = xs.shape[0]
     for j in range(first, last + 1):
         acc = 0.0
         acc_rec = 0.0
+        acc_exact = 0.0
         if dual:
             for d in range(D):
                 diff = xs[d] - templates[j, d]
@@ -83,6 +92,8 @@ def _emission_rows(templates, weights, log_norm, log_norm_sum, first, last, xs, 
                 acc += v if v < cap else cap
                 v = weights[1, j, d] * sq
                 acc_rec += v if v < cap else cap
+                v = weights[0, j, d] * sq * exact_scale2
+                acc_exact += v if v < cap else cap
         else:
             for d in range(D):
                 diff = xs[d] - templates[j, d]
@@ -100,6 +111,7 @@ def _emission_rows(templates, weights, log_norm, log_norm_sum, first, last, xs, 
         residual[j] = acc
         out[0, j] = norm + norm_shift - 0.5 * acc
         out[1, j] = (norm_rec - 0.5 * acc_rec) if dual else out[0, j]
+        out[2, j] = (norm + exact_shift - 0.5 * acc_exact) if dual else out[0, j]
 
 
 @nb.njit(cache=True)
@@ -247,17 +259,20 @@ def _predictive_loglik(rowsum, logb, model, support, k, off):
 
 @nb.njit(cache=True)
 def template_step(k, templates, offsets, lengths, half_windows, weights, log_norm, log_norm_sum,
-                  xs, observed, n_obs, cap, dual, prune, advance, advance_tail, advance_range,
-                  speed_change, initial_speed, restart, alpha, rowsum, logb, support, moments,
-                  main, fresh, loglik, frame_loglik, mix, adapt, scale2, scale_weight, residual):
+                  xs, observed, n_obs, cap, dual, mixture, exact_scale, prune, advance,
+                  advance_tail, advance_range, speed_change, initial_speed, restart, alpha,
+                  rowsum, logb, support, moments, main, fresh, loglik, frame_loglik, mix,
+                  adapt, scale2, scale_weight, residual):
     """One frame of the windowed forward algorithm for template ``k`` (see the module docstring
     for the layout). ``weights (2, S, D)``: 1 / sigma**2 per model and state; ``log_norm
     (2, S, D)``: -0.5 log(2 pi sigma**2), ``log_norm_sum (2, S)`` its sum over channels;
-    ``dual``: score frames with model 1 too; ``half_windows (K,)``: window half-width p in
-    states (>= T: full forward); ``prune``: 0, or a mass below which states at the edges of a
-    track's support are dropped (beam pruning: the support stays inside the window but is often
-    much narrower). ``advance_range (M, 2)``: first and last nonzero advance per level;
-    ``mix (M,)``: scratch."""
+    ``dual``: score frames with model 1 too; ``mixture`` in [0, 1): with dual, the weight of
+    model 2 (model 0's sigma times ``exact_scale`` > 0) in the recognition score (0: model 1
+    alone); ``half_windows (K,)``: window
+    half-width p in states (>= T: full forward); ``prune``: 0, or a mass below which states at
+    the edges of a track's support are dropped (beam pruning: the support stays inside the
+    window but is often much narrower). ``advance_range (M, 2)``: first and last nonzero
+    advance per level; ``mix (M,)``: scratch."""
     off = offsets[k]
     T = lengths[k]
     M = alpha.shape[2]
@@ -348,29 +363,43 @@ def template_step(k, templates, offsets, lengths, half_windows, weights, log_nor
     s2 = scale2[k]
     inv_scale2 = 1.0 / s2
     norm_shift = -0.5 * n_obs * math.log(s2)
+    exact_scale2 = 1.0 / (exact_scale * exact_scale)
+    exact_shift = -n_obs * math.log(exact_scale)
     if n_obs > 0:
         all_observed = n_obs == xs.shape[0]
         if has_main:
             _emission_rows(templates, weights, log_norm, log_norm_sum, off + m_first,
                            off + m_last, xs, observed, all_observed, cap, dual, inv_scale2,
-                           norm_shift, logb, residual)
+                           norm_shift, exact_scale2, exact_shift, logb, residual)
         if has_entry:
             # only the rows the main track did not already cover
             if not has_main or e_last < m_first or e_first > m_last:
                 _emission_rows(templates, weights, log_norm, log_norm_sum, off + e_first,
                                off + e_last, xs, observed, all_observed, cap, dual,
-                               inv_scale2, norm_shift, logb, residual)
+                               inv_scale2, norm_shift, exact_scale2, exact_shift, logb,
+                               residual)
             else:
                 if e_first < m_first:
                     _emission_rows(templates, weights, log_norm, log_norm_sum, off + e_first,
                                    off + m_first - 1, xs, observed, all_observed, cap, dual,
-                                   inv_scale2, norm_shift, logb, residual)
+                                   inv_scale2, norm_shift, exact_scale2, exact_shift, logb,
+                                   residual)
                 if e_last > m_last:
                     _emission_rows(templates, weights, log_norm, log_norm_sum, off + m_last + 1,
                                    off + e_last, xs, observed, all_observed, cap, dual,
-                               inv_scale2, norm_shift, logb, residual)
+                                   inv_scale2, norm_shift, exact_scale2, exact_shift, logb,
+                                   residual)
         if dual:
-            frame_loglik[1, k] = _predictive_loglik(rowsum, logb, 1, support, k, off)
+            wide = _predictive_loglik(rowsum, logb, 1, support, k, off)
+            if mixture > 0.0:
+                # the mixture per state, summed over the same predicted states: the two
+                # models' predictive likelihoods, mixed
+                exact = _predictive_loglik(rowsum, logb, 2, support, k, off)
+                a = math.log(mixture) + exact
+                b = math.log1p(-mixture) + wide
+                top = a if a > b else b
+                wide = top + math.log(math.exp(a - top) + math.exp(b - top))
+            frame_loglik[1, k] = wide
         shift = -np.inf
         for t in range(2):
             first = support[k, t, 0]
@@ -493,37 +522,38 @@ def template_step(k, templates, offsets, lengths, half_windows, weights, log_nor
 
 @nb.njit(cache=True)
 def bank_step(x, lower, upper, templates, offsets, lengths, half_windows, weights, log_norm,
-              log_norm_sum, cap, dual, prune, advance, advance_tail, advance_range, speed_change,
-              initial_speed, restart, alpha, rowsum, logb, support, moments, main, fresh, loglik,
-              frame_loglik, xs, observed, mix, adapt, scale2, scale_weight, residual):
+              log_norm_sum, cap, dual, mixture, exact_scale, prune, advance, advance_tail,
+              advance_range, speed_change, initial_speed, restart, alpha, rowsum, logb,
+              support, moments, main, fresh, loglik, frame_loglik, xs, observed, mix, adapt,
+              scale2, scale_weight, residual):
     """One frame for all K templates. ``x (D,)`` is the raw input frame. Returns the number of
     observed channels."""
     n_obs = prepare_frame(x, lower, upper, xs, observed)
     for k in range(offsets.shape[0]):
         template_step(k, templates, offsets, lengths, half_windows, weights, log_norm,
-                      log_norm_sum, xs, observed, n_obs, cap, dual, prune, advance, advance_tail,
-                      advance_range, speed_change, initial_speed, restart, alpha, rowsum, logb,
-                      support, moments, main, fresh, loglik, frame_loglik, mix, adapt, scale2,
-                      scale_weight, residual)
+                      log_norm_sum, xs, observed, n_obs, cap, dual, mixture, exact_scale,
+                      prune, advance, advance_tail, advance_range, speed_change,
+                      initial_speed, restart, alpha, rowsum, logb, support, moments, main,
+                      fresh, loglik, frame_loglik, mix, adapt, scale2, scale_weight, residual)
     return n_obs
 
 
 @nb.njit(cache=True)
 def follow_sequence(X, lower, upper, templates, offsets, lengths, half_windows, weights, log_norm,
-                    log_norm_sum, cap, dual, prune, advance, advance_tail, advance_range,
-                    speed_change, initial_speed, restart, alpha, rowsum, logb, support, moments,
-                    main, fresh, loglik, frame_loglik, xs, observed, mix, adapt, scale2,
-                    scale_weight, residual, out_progress, out_variance, out_loglik):
+                    log_norm_sum, cap, dual, mixture, exact_scale, prune, advance, advance_tail,
+                    advance_range, speed_change, initial_speed, restart, alpha, rowsum, logb,
+                    support, moments, main, fresh, loglik, frame_loglik, xs, observed, mix,
+                    adapt, scale2, scale_weight, residual, out_progress, out_variance, out_loglik):
     """Run ``bank_step`` over the rows of ``X (N, D)``; write each template's main-track
     progress and variance (in [0, 1] units) and cumulative log-likelihood into
     ``out_* (N, K)``."""
     K = offsets.shape[0]
     for n in range(X.shape[0]):
         bank_step(X[n], lower, upper, templates, offsets, lengths, half_windows, weights,
-                  log_norm, log_norm_sum, cap, dual, prune, advance, advance_tail, advance_range,
-                  speed_change, initial_speed, restart, alpha, rowsum, logb, support, moments,
-                  main, fresh, loglik, frame_loglik, xs, observed, mix, adapt, scale2,
-                  scale_weight, residual)
+                  log_norm, log_norm_sum, cap, dual, mixture, exact_scale, prune, advance,
+                  advance_tail, advance_range, speed_change, initial_speed, restart, alpha,
+                  rowsum, logb, support, moments, main, fresh, loglik, frame_loglik, xs,
+                  observed, mix, adapt, scale2, scale_weight, residual)
         for k in range(K):
             scale = 1.0 / (lengths[k] - 1)
             t = main[k]

@@ -25,7 +25,7 @@ The emission of state ``j`` is ``sum over observed channels d`` of
 ``-0.5 * min(w[e, j, d] * (x[d] - template[j, d])**2, cap) - 0.5 * log(2 pi sigma[e, j, d]**2)``
 with ``w = 1 / sigma**2``, sigma per model ``e`` (0: the follower's, 1: recognition, 2: the
 recognition mixture's narrow component: model 0's sigma, unscaled, times ``exact_scale``),
-state and channel: ``weights, log_norm (2, S, D)``.
+state and channel: ``weights, log_norm (2, S, D)`` (model 2 needs no arrays of its own).
 ``cap = inf`` is the plain Gaussian of the paper (equation 1); a finite cap bounds what one wild
 channel can do. Each frame is scaled by the largest emission, so nothing under- or overflows
 however long the run.
@@ -76,9 +76,9 @@ def _emission_rows(templates, weights, log_norm, log_norm_sum, first, last, xs, 
     #             sigma is multiplied by the online scale (w / scale**2; norm_shift =
     #             -n_obs * log(scale)), e = 1 the recognition model (only when dual, else a copy
     #             of e = 0), e = 2 the narrow component of the recognition mixture: model 0's
-    #             sigma without the online scale, divided by sqrt(exact_scale2) (exact_shift =
-    #             n_obs * log(that) / 2). residual[j]: the capped sum of squared z-scores of
-    #             model 0.
+    #             sigma without the online scale, times exact_scale (exact_scale2 = its inverse
+    #             square, exact_shift = -n_obs * log(exact_scale)). residual[j]: the capped sum
+    #             of squared z-scores of model 0.
     D = xs.shape[0]
     for j in range(first, last + 1):
         acc = 0.0
@@ -268,11 +268,11 @@ def template_step(k, templates, offsets, lengths, half_windows, weights, log_nor
     (2, S, D)``: -0.5 log(2 pi sigma**2), ``log_norm_sum (2, S)`` its sum over channels;
     ``dual``: score frames with model 1 too; ``mixture`` in [0, 1): with dual, the weight of
     model 2 (model 0's sigma times ``exact_scale`` > 0) in the recognition score (0: model 1
-    alone); ``half_windows (K,)``: window
-    half-width p in states (>= T: full forward); ``prune``: 0, or a mass below which states at
-    the edges of a track's support are dropped (beam pruning: the support stays inside the
-    window but is often much narrower). ``advance_range (M, 2)``: first and last nonzero
-    advance per level; ``mix (M,)``: scratch."""
+    alone); ``half_windows (K,)``: window half-width p in states (>= T: full forward);
+    ``prune``: 0, or a mass below which states at the edges of a track's support are dropped
+    (beam pruning: the support stays inside the window but is often much narrower).
+    ``advance_range (M, 2)``: first and last nonzero advance per level; ``mix (M,)``:
+    scratch."""
     off = offsets[k]
     T = lengths[k]
     M = alpha.shape[2]
@@ -390,16 +390,15 @@ def template_step(k, templates, offsets, lengths, half_windows, weights, log_nor
                                    inv_scale2, norm_shift, exact_scale2, exact_shift, logb,
                                    residual)
         if dual:
-            wide = _predictive_loglik(rowsum, logb, 1, support, k, off)
+            score = _predictive_loglik(rowsum, logb, 1, support, k, off)
             if mixture > 0.0:
                 # the mixture per state, summed over the same predicted states: the two
                 # models' predictive likelihoods, mixed
-                exact = _predictive_loglik(rowsum, logb, 2, support, k, off)
-                a = math.log(mixture) + exact
-                b = math.log1p(-mixture) + wide
+                a = math.log(mixture) + _predictive_loglik(rowsum, logb, 2, support, k, off)
+                b = math.log1p(-mixture) + score
                 top = a if a > b else b
-                wide = top + math.log(math.exp(a - top) + math.exp(b - top))
-            frame_loglik[1, k] = wide
+                score = top + math.log(math.exp(a - top) + math.exp(b - top))
+            frame_loglik[1, k] = score
         shift = -np.inf
         for t in range(2):
             first = support[k, t, 0]

@@ -393,6 +393,23 @@ def wiimote(args):
     labels = ("ours: bank.action", "ours: bank.action, rejection off",
               "ours: argmax bank.log_likelihoods", "XMM-style (re-implementation)")
     scores = {label: [] for label in labels}
+    # the same demonstrations performed again by their performer: replayed at 0.5-2x, the
+    # tempo wandering and 5 % noise (as in the progress section), 4 times per gesture and draw
+    replay_rng = np.random.default_rng(17)
+    replayed = {labels[0]: [], labels[3]: []}
+
+    def marks_of(performance):
+        N = len(performance)
+        return [max(0, int(math.ceil(q * N)) - 1) for q in (0.25, 0.5, 1.0)]
+
+    def bank_right(bank, performance, label, marks):
+        actions = bank.follow(performance)["action"]
+        return [actions[m] >= 0 and classes[actions[m]] == label for m in marks]
+
+    def xmm_right(models, performance, label, marks):
+        return [classes[int(np.argmax([mdl.score(performance[:m + 1]) for mdl in models]))]
+                == label for m in marks]
+
     draws = []
     for _ in range(rounds):
         pick = [int(rng.choice(np.nonzero(y == c)[0])) for c in classes]
@@ -403,42 +420,24 @@ def wiimote(args):
         models = [xmm_style(d) for d in normed]
         for x, label in zip(Xt, yt):
             performance = normaliser(x)
-            N = len(performance)
-            marks = [max(0, int(math.ceil(q * N)) - 1) for q in (0.25, 0.5, 1.0)]
-            actions = bank.follow(performance)["action"]
-            scores[labels[0]].append([actions[m] >= 0 and classes[actions[m]] == label
-                                      for m in marks])
+            marks = marks_of(performance)
+            scores[labels[0]].append(bank_right(bank, performance, label, marks))
             trace = open_bank.follow(performance)
             scores[labels[1]].append([classes[trace["action"][m]] == label for m in marks])
             scores[labels[2]].append([classes[int(np.argmax(trace["log_likelihoods"][m]))]
                                       == label for m in marks])
-            scores[labels[3]].append([classes[int(np.argmax([mdl.score(performance[:m + 1])
-                                                             for mdl in models]))] == label
-                                      for m in marks])
-    for label, rows in scores.items():
-        acc = 100 * np.mean(rows, axis=0)
-        say(f"  {label:<36} {acc[0]:5.1f} % / {acc[1]:5.1f} % / {acc[2]:5.1f} %")
-    say("  (chance: 10 %)")
-    # the same demonstrations performed again by their performer: replayed at 0.5-2x, the
-    # tempo wandering and 5 % noise (as in the progress section), 4 times per gesture and draw
-    replay_rng = np.random.default_rng(17)
-    replayed = {labels[0]: [], labels[3]: []}
-    for pick in draws:
-        normed, _ = normalise([X[i] for i in pick])
-        bank = FollowerBank(dict(zip(classes, normed)))
-        models = [xmm_style(d) for d in normed]
+            scores[labels[3]].append(xmm_right(models, performance, label, marks))
         for label, template in zip(classes, normed):
             for _ in range(4):
                 performance = perform(template, replay_rng.choice((0.5, 1.0, 1.5, 2.0)),
                                       replay_rng)[0]
-                N = len(performance)
-                marks = [max(0, int(math.ceil(q * N)) - 1) for q in (0.25, 0.5, 1.0)]
-                actions = bank.follow(performance)["action"]
-                replayed[labels[0]].append([actions[m] >= 0 and classes[actions[m]] == label
-                                            for m in marks])
-                replayed[labels[3]].append([
-                    classes[int(np.argmax([mdl.score(performance[:m + 1]) for mdl in models]))]
-                    == label for m in marks])
+                marks = marks_of(performance)
+                replayed[labels[0]].append(bank_right(bank, performance, label, marks))
+                replayed[labels[3]].append(xmm_right(models, performance, label, marks))
+    for label, rows in scores.items():
+        acc = 100 * np.mean(rows, axis=0)
+        say(f"  {label:<36} {acc[0]:5.1f} % / {acc[1]:5.1f} % / {acc[2]:5.1f} %")
+    say("  (chance: 10 %)")
     say("the demonstrations themselves performed again (0.5-2x, tempo wandering, 5 % noise; "
         f"4 per gesture and draw, {len(replayed[labels[0]])} in all):")
     for label, rows in replayed.items():

@@ -75,10 +75,10 @@ def _emission_rows(templates, weights, log_norm, log_norm_sum, first, last, xs, 
     #             + log_norm[e, j, d], for rows first..last; e = 0 the follower's model, whose
     #             sigma is multiplied by the online scale (w / scale**2; norm_shift =
     #             -n_obs * log(scale)), e = 1 the recognition model (only when dual, else a copy
-    #             of e = 0), e = 2 the narrow component of the recognition mixture: model 0's
-    #             sigma without the online scale, times exact_scale (exact_scale2 = its inverse
-    #             square, exact_shift = -n_obs * log(exact_scale)). residual[j]: the capped sum
-    #             of squared z-scores of model 0.
+    #             of e = 0), e = 2 (only when dual) the recognition mixture's narrow
+    #             component: model 0's sigma without the online scale, times exact_scale
+    #             (exact_scale2 = its inverse square, exact_shift = -n_obs * log(exact_scale)).
+    #             residual[j]: the capped sum of squared z-scores of model 0.
     D = xs.shape[0]
     for j in range(first, last + 1):
         acc = 0.0
@@ -110,8 +110,11 @@ def _emission_rows(templates, weights, log_norm, log_norm_sum, first, last, xs, 
                 norm_rec += log_norm[1, j, d] * observed[d]
         residual[j] = acc
         out[0, j] = norm + norm_shift - 0.5 * acc
-        out[1, j] = (norm_rec - 0.5 * acc_rec) if dual else out[0, j]
-        out[2, j] = (norm + exact_shift - 0.5 * acc_exact) if dual else out[0, j]
+        if dual:
+            out[1, j] = norm_rec - 0.5 * acc_rec
+            out[2, j] = norm + exact_shift - 0.5 * acc_exact
+        else:
+            out[1, j] = out[0, j]
 
 
 @nb.njit(cache=True)

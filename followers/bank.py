@@ -357,7 +357,6 @@ class FollowerBank:
             for a, s in zip(arrays, sigmas)]
         mixture = None if (recognition is None or recognition_mixture == 0.0) else (
             recognition_mixture, 1.0 / BANK_SIGMA_SCALE)
-        self.recognition_mixture = 0.0 if mixture is None else recognition_mixture
         self._engine = ForwardEngine(arrays, sigmas, windows, model,
                                      cap=resolve_cap(outlier_sigmas, model.kind),
                                      prune=0.0 if model.kind == "mop" else PRUNE_MASS,
@@ -456,6 +455,12 @@ class FollowerBank:
     def variances(self) -> np.ndarray:
         """(K,) float: every follower's progress variance [progress units squared]."""
         return self._variance
+
+    @property
+    def recognition_mixture(self) -> float:
+        """Weight of the exact-repetition component of the recognition score (0: none; see
+        the ``recognition_mixture`` parameter)."""
+        return self._engine.mixture
 
     @property
     def log_likelihoods(self) -> np.ndarray:

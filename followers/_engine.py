@@ -39,8 +39,8 @@ class ForwardEngine:
         None scores with the follower's own model
     recognition_mixture : (weight, scale), optional, with recognition_sigmas: the recognition
         model becomes a mixture per state, ``weight`` in (0, 1) on a Gaussian of the follower's
-        sigma times ``scale`` > 0 (not the learned scale) and ``1 - weight`` on the
-        recognition_sigmas' one
+        sigma times ``scale`` (not the learned scale; a float, or (K, D): per template and
+        channel, each > 0) and ``1 - weight`` on the recognition_sigmas' one
     prune : float: edge states of a track's support below this mass are dropped (0 = never)
     scale_adaptation : (memory [frames], prior [frames], lowest, highest scale) or None: learn
         each follower's emission scale online (sigma x scale, EM on one scalar per template,
@@ -50,7 +50,7 @@ class ForwardEngine:
     def __init__(self, templates: list[np.ndarray], sigmas: list[np.ndarray], windows: np.ndarray,
                  transitions: TransitionModel, *, cap: float, prune: float,
                  recognition_sigmas: list[np.ndarray] | None = None,
-                 recognition_mixture: tuple[float, float] | None = None,
+                 recognition_mixture: tuple[float, float | np.ndarray] | None = None,
                  scale_adaptation: tuple[float, float, float, float] | None = None):
         R = transitions.resolution
         if R > 1:
@@ -71,14 +71,27 @@ class ForwardEngine:
         # recognition mixture) only score frames for recognition
         self.dual = recognition_sigmas is not None
         rec = (np.concatenate(recognition_sigmas, axis=0) if self.dual else self.sigmas)
-        self.mixture, self.exact_scale = 0.0, 1.0
+        self.mixture = 0.0
+        # the narrow component's scale per template and channel: its inverse square and log
+        self.exact_scales = np.ones((len(templates), self.channels))
         if recognition_mixture is not None:
             if not self.dual:
                 raise ValueError("a recognition mixture needs recognition_sigmas")
-            self.mixture, self.exact_scale = (float(v) for v in recognition_mixture)
-            if not (0.0 < self.mixture < 1.0 and self.exact_scale > 0.0):
-                raise ValueError(f"a recognition mixture needs a weight in (0, 1) and a scale "
-                                 f"> 0, got {recognition_mixture}")
+            weight, scale = recognition_mixture
+            self.mixture = float(weight)
+            try:
+                self.exact_scales[:] = scale
+            except ValueError:
+                raise ValueError(f"a recognition mixture's scale must be a float or "
+                                 f"{self.exact_scales.shape}, got shape {np.shape(scale)}"
+                                 ) from None
+            if not (0.0 < self.mixture < 1.0 and np.all(self.exact_scales > 0.0)
+                    and np.all(np.isfinite(self.exact_scales))):
+                raise ValueError(f"a recognition mixture needs a weight in (0, 1) and scales "
+                                 f"> 0, got weight {weight} and scales from "
+                                 f"{self.exact_scales.min()} to {self.exact_scales.max()}")
+        self.exact_inv2 = np.ascontiguousarray(1.0 / self.exact_scales ** 2)
+        self.exact_log = np.ascontiguousarray(np.log(self.exact_scales))
         both = np.stack([self.sigmas, np.asarray(rec, dtype=np.float64)])
         self.weights = np.ascontiguousarray(1.0 / both ** 2)
         self.state_log_norm = np.ascontiguousarray(-0.5 * np.log(2.0 * np.pi * both ** 2))
@@ -163,7 +176,7 @@ class ForwardEngine:
         return _kernels.bank_step(
             x, self.lower, self.upper, self.templates, self.offsets, self.lengths,
             self.half_windows, self.weights, self.state_log_norm, self.state_log_norm_sum,
-            self.cap, self.dual, self.mixture, self.exact_scale, self.prune,
+            self.cap, self.dual, self.mixture, self.exact_inv2, self.exact_log, self.prune,
             self.advance, self.advance_tail, self.advance_range, self.speed_change,
             self.initial_speed, self.restart,
             self.alpha, self.rowsum, self.logb, self.support, self.moments, self.main, self.fresh,
@@ -181,7 +194,7 @@ class ForwardEngine:
         _kernels.follow_sequence(
             X, self.lower, self.upper, self.templates, self.offsets, self.lengths,
             self.half_windows, self.weights, self.state_log_norm, self.state_log_norm_sum,
-            self.cap, self.dual, self.mixture, self.exact_scale, self.prune,
+            self.cap, self.dual, self.mixture, self.exact_inv2, self.exact_log, self.prune,
             self.advance, self.advance_tail, self.advance_range, self.speed_change,
             self.initial_speed, self.restart,
             self.alpha, self.rowsum, self.logb, self.support, self.moments, self.main, self.fresh,

@@ -24,8 +24,9 @@ Layout shared by every kernel (K templates stacked, ``S = sum(T_k)`` states in a
 The emission of state ``j`` is ``sum over observed channels d`` of
 ``-0.5 * min(w[e, j, d] * (x[d] - template[j, d])**2, cap) - 0.5 * log(2 pi sigma[e, j, d]**2)``
 with ``w = 1 / sigma**2``, sigma per model ``e`` (0: the follower's, 1: recognition, 2: the
-recognition mixture's narrow component: model 0's sigma, unscaled, times ``exact_scale``),
-state and channel: ``weights, log_norm (2, S, D)`` (model 2 needs no arrays of its own).
+recognition mixture's narrow component: model 0's sigma, unscaled, times the template's
+exact scale per channel), state and channel: ``weights, log_norm (2, S, D)`` (model 2 needs
+only its (K, D) scales).
 ``cap = inf`` is the plain Gaussian of the paper (equation 1); a finite cap bounds what one wild
 channel can do. Each frame is scaled by the largest emission, so nothing under- or overflows
 however long the run.
@@ -76,8 +77,9 @@ def _emission_rows(templates, weights, log_norm, log_norm_sum, first, last, xs, 
     #             sigma is multiplied by the online scale (w / scale**2; norm_shift =
     #             -n_obs * log(scale)), e = 1 the recognition model (only when dual, else a copy
     #             of e = 0), e = 2 (only when dual) the recognition mixture's narrow
-    #             component: model 0's sigma without the online scale, times exact_scale
-    #             (exact_scale2 = its inverse square, exact_shift = -n_obs * log(exact_scale)).
+    #             component: model 0's sigma without the online scale, times the template's
+    #             exact scale per channel (exact_scale2 (D,) = its inverse square, exact_shift =
+    #             minus the sum of its logs over the observed channels).
     #             residual[j]: the capped sum of squared z-scores of model 0.
     D = xs.shape[0]
     for j in range(first, last + 1):
@@ -92,7 +94,7 @@ def _emission_rows(templates, weights, log_norm, log_norm_sum, first, last, xs, 
                 acc += v if v < cap else cap
                 v = weights[1, j, d] * sq
                 acc_rec += v if v < cap else cap
-                v = weights[0, j, d] * sq * exact_scale2
+                v = weights[0, j, d] * sq * exact_scale2[d]
                 acc_exact += v if v < cap else cap
         else:
             for d in range(D):
@@ -262,18 +264,19 @@ def _predictive_loglik(rowsum, logb, model, support, k, off):
 
 @nb.njit(cache=True)
 def template_step(k, templates, offsets, lengths, half_windows, weights, log_norm, log_norm_sum,
-                  xs, observed, n_obs, cap, dual, mixture, exact_scale, prune, advance,
-                  advance_tail, advance_range, speed_change, initial_speed, restart, alpha,
-                  rowsum, logb, support, moments, main, fresh, loglik, frame_loglik, mix,
+                  xs, observed, n_obs, cap, dual, mixture, exact_inv2, exact_log, prune,
+                  advance, advance_tail, advance_range, speed_change, initial_speed, restart,
+                  alpha, rowsum, logb, support, moments, main, fresh, loglik, frame_loglik, mix,
                   adapt, scale2, scale_weight, residual):
     """One frame of the windowed forward algorithm for template ``k`` (see the module docstring
     for the layout). ``weights (2, S, D)``: 1 / sigma**2 per model and state; ``log_norm
     (2, S, D)``: -0.5 log(2 pi sigma**2), ``log_norm_sum (2, S)`` its sum over channels;
     ``dual``: score frames with model 1 too; ``mixture`` in [0, 1): with dual, the weight of
-    model 2 (model 0's sigma times ``exact_scale`` > 0) in the recognition score (0: model 1
-    alone); ``half_windows (K,)``: window half-width p in states (>= T: full forward);
-    ``prune``: 0, or a mass below which states at the edges of a track's support are dropped
-    (beam pruning: the support stays inside the window but is often much narrower).
+    model 2 (model 0's sigma times ``exp(exact_log[k])`` per channel; ``exact_inv2 (K, D)``
+    the inverse square of that scale) in the recognition score (0: model 1 alone);
+    ``half_windows (K,)``: window half-width p in states (>= T: full forward); ``prune``: 0,
+    or a mass below which states at the edges of a track's support are dropped (beam pruning:
+    the support stays inside the window but is often much narrower).
     ``advance_range (M, 2)``: first and last nonzero advance per level; ``mix (M,)``:
     scratch."""
     off = offsets[k]
@@ -366,8 +369,11 @@ def template_step(k, templates, offsets, lengths, half_windows, weights, log_nor
     s2 = scale2[k]
     inv_scale2 = 1.0 / s2
     norm_shift = -0.5 * n_obs * math.log(s2)
-    exact_scale2 = 1.0 / (exact_scale * exact_scale)
-    exact_shift = -n_obs * math.log(exact_scale)
+    exact_scale2 = exact_inv2[k]
+    exact_shift = 0.0
+    if dual and mixture > 0.0:
+        for d in range(xs.shape[0]):
+            exact_shift -= observed[d] * exact_log[k, d]
     if n_obs > 0:
         all_observed = n_obs == xs.shape[0]
         if has_main:
@@ -524,17 +530,17 @@ def template_step(k, templates, offsets, lengths, half_windows, weights, log_nor
 
 @nb.njit(cache=True)
 def bank_step(x, lower, upper, templates, offsets, lengths, half_windows, weights, log_norm,
-              log_norm_sum, cap, dual, mixture, exact_scale, prune, advance, advance_tail,
-              advance_range, speed_change, initial_speed, restart, alpha, rowsum, logb,
-              support, moments, main, fresh, loglik, frame_loglik, xs, observed, mix, adapt,
-              scale2, scale_weight, residual):
+              log_norm_sum, cap, dual, mixture, exact_inv2, exact_log, prune, advance,
+              advance_tail, advance_range, speed_change, initial_speed, restart, alpha, rowsum,
+              logb, support, moments, main, fresh, loglik, frame_loglik, xs, observed, mix,
+              adapt, scale2, scale_weight, residual):
     """One frame for all K templates. ``x (D,)`` is the raw input frame. Returns the number of
     observed channels."""
     n_obs = prepare_frame(x, lower, upper, xs, observed)
     for k in range(offsets.shape[0]):
         template_step(k, templates, offsets, lengths, half_windows, weights, log_norm,
-                      log_norm_sum, xs, observed, n_obs, cap, dual, mixture, exact_scale,
-                      prune, advance, advance_tail, advance_range, speed_change,
+                      log_norm_sum, xs, observed, n_obs, cap, dual, mixture, exact_inv2,
+                      exact_log, prune, advance, advance_tail, advance_range, speed_change,
                       initial_speed, restart, alpha, rowsum, logb, support, moments, main,
                       fresh, loglik, frame_loglik, mix, adapt, scale2, scale_weight, residual)
     return n_obs
@@ -542,19 +548,20 @@ def bank_step(x, lower, upper, templates, offsets, lengths, half_windows, weight
 
 @nb.njit(cache=True)
 def follow_sequence(X, lower, upper, templates, offsets, lengths, half_windows, weights, log_norm,
-                    log_norm_sum, cap, dual, mixture, exact_scale, prune, advance, advance_tail,
-                    advance_range, speed_change, initial_speed, restart, alpha, rowsum, logb,
-                    support, moments, main, fresh, loglik, frame_loglik, xs, observed, mix,
-                    adapt, scale2, scale_weight, residual, out_progress, out_variance, out_loglik):
+                    log_norm_sum, cap, dual, mixture, exact_inv2, exact_log, prune, advance,
+                    advance_tail, advance_range, speed_change, initial_speed, restart, alpha,
+                    rowsum, logb, support, moments, main, fresh, loglik, frame_loglik, xs,
+                    observed, mix, adapt, scale2, scale_weight, residual, out_progress,
+                    out_variance, out_loglik):
     """Run ``bank_step`` over the rows of ``X (N, D)``; write each template's main-track
     progress and variance (in [0, 1] units) and cumulative log-likelihood into
     ``out_* (N, K)``."""
     K = offsets.shape[0]
     for n in range(X.shape[0]):
         bank_step(X[n], lower, upper, templates, offsets, lengths, half_windows, weights,
-                  log_norm, log_norm_sum, cap, dual, mixture, exact_scale, prune, advance,
-                  advance_tail, advance_range, speed_change, initial_speed, restart, alpha,
-                  rowsum, logb, support, moments, main, fresh, loglik, frame_loglik, xs,
+                  log_norm, log_norm_sum, cap, dual, mixture, exact_inv2, exact_log, prune,
+                  advance, advance_tail, advance_range, speed_change, initial_speed, restart,
+                  alpha, rowsum, logb, support, moments, main, fresh, loglik, frame_loglik, xs,
                   observed, mix, adapt, scale2, scale_weight, residual)
         for k in range(K):
             scale = 1.0 / (lengths[k] - 1)

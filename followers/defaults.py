@@ -8,6 +8,10 @@
   from it by less than a quarter of the channel's range of motion; a much smaller sigma makes
   the follower brittle, a much larger one blurs positions (measured on GunPoint: 0.15-0.4 all
   give median errors near 1 %).
+- **exact-repetition sigma** (a bank's recognition mixture, per channel): the template's own
+  noise, from its second differences (``noise_sigma``), clipped to [``EXACT_FLOOR`` (0.25), 1]
+  times the default sigma (``exact_scale``): a take replayed by its performer differs from the
+  demonstration by about the sensor's noise.
 - **window** (half-width p, in states): ``ceil(WINDOW_FRACTION * T)`` (a fifth of the
   template), at least ``WINDOW_MIN`` (8) and at most T. The posterior of a follower that is on
   track is a few states wide; p only has to hold it through ambiguous stretches (a held pose),
@@ -24,6 +28,7 @@ SIGMA_FRACTION = 0.25
 SIGMA_FLOOR = 0.05
 LOCAL_FRACTION = 0.05
 RECOGNITION_FRACTION = 0.5
+EXACT_FLOOR = 0.25
 WINDOW_FRACTION = 0.2
 WINDOW_MIN = 8
 
@@ -112,6 +117,33 @@ def recognition_sigma(template: np.ndarray, sigma: np.ndarray) -> np.ndarray:
         return sigma.copy()
     own = RECOGNITION_FRACTION * np.maximum(spread, SIGMA_FLOOR * rms)
     return np.maximum(sigma, own[None, :])
+
+
+def noise_sigma(template: np.ndarray) -> np.ndarray:
+    """(D,) float: each channel's sensor noise estimated from the template itself [input units].
+
+    The median absolute second difference: white noise of standard deviation s has second
+    differences of standard deviation sqrt(6) s, while a motion sampled densely enough has
+    second differences near zero, so the median (robust to the motion's few sharp turns)
+    measures the noise: ``median |x[t+1] - 2 x[t] + x[t-1] - m| / (0.6745 sqrt(6))`` with ``m``
+    the median second difference. Zeros for templates of fewer than 3 frames."""
+    if template.shape[0] < 3:
+        return np.zeros(template.shape[1])
+    second = np.diff(template, n=2, axis=0)
+    mad = np.median(np.abs(second - np.median(second, axis=0)), axis=0)
+    return mad / (0.6745 * math.sqrt(6.0))
+
+
+def exact_scale(template: np.ndarray, sigma: np.ndarray) -> np.ndarray:
+    """(D,) float: the scale of a bank's exact-repetition model for one template, relative to
+    the follower's default ``sigma (T, D)``: the template's own noise (``noise_sigma``) per
+    channel, clipped to [``EXACT_FLOOR``, 1] times the default. A performer's own take
+    replayed differs from the demonstration by about its sensor noise; a channel noisier than
+    the default sigma (repetitive activities) keeps the default, and a nearly noiseless one
+    (GunPoint's smoothed positions: 0.3 % of their spread) is floored at a quarter of it."""
+    base = np.median(sigma, axis=0)
+    ratio = noise_sigma(template) / base
+    return np.clip(ratio, EXACT_FLOOR, 1.0)
 
 
 def default_window(length: int) -> int:

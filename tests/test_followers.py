@@ -560,9 +560,10 @@ def test_bank_recognition_mixture_is_the_two_models_mixed_per_state(rng, actions
         return ForwardEngine(templates, follow, windows, model, cap=25.0, prune=1e-9,
                              recognition_sigmas=recognition, recognition_mixture=mixture)
 
-    # the narrow component: the follower's sigma times 0.4
-    mixed = engine(tolerant, (0.3, 0.4))
-    alone = [engine(tolerant), engine([0.4 * s for s in follow])]
+    # the narrow component: the follower's sigma times a scale per template and channel
+    scales = rng.uniform(0.25, 1.0, size=(len(templates), 4))
+    mixed = engine(tolerant, (0.3, scales))
+    alone = [engine(tolerant), engine([s * c for s, c in zip(follow, scales)])]
     X = time_warp(actions["nod"], 1.4)[0] + rng.normal(scale=0.3, size=(1, 4))
     X[5:9, 1] = np.nan
     X[12] = np.nan
@@ -587,6 +588,32 @@ def test_bank_recognition_mixture_is_the_two_models_mixed_per_state(rng, actions
     for bad in (1.0, -0.1, float("nan")):
         with pytest.raises(ValueError, match=r"recognition_mixture must be in \[0, 1\)"):
             FollowerBank(actions, recognition_mixture=bad)
+    for bad in (np.zeros((3, 4)), np.ones((2, 4))):
+        with pytest.raises(ValueError, match="a recognition mixture"):
+            engine(tolerant, (0.3, bad))
+
+
+def test_bank_exact_model_is_as_narrow_as_each_templates_own_noise(rng):
+    """The recognition mixture's exact-repetition component has each template's sensor noise as
+    its sigma, per channel: white noise of a known standard deviation added to a smooth motion
+    is measured from the template alone to within 10 % (its second differences), and the
+    sigma is clipped to [a quarter, 1] x the default sigma, so a noiseless channel gets the
+    floor and one noisier than the default sigma the default."""
+    from followers.defaults import default_sigma, noise_sigma
+    t = np.linspace(0.0, 4.0 * np.pi, 2000)[:, None]
+    smooth = np.hstack([np.sin(t), np.cos(0.5 * t), np.sin(1.5 * t)])
+    noise = np.array([0.08, 0.0, 0.6])
+    template = smooth + rng.normal(size=smooth.shape) * noise
+    measured = noise_sigma(template)
+    np.testing.assert_allclose(measured[[0, 2]], noise[[0, 2]], rtol=0.1)
+    assert measured[1] < 1e-3  # the motion's own second differences
+    other = template[::-1].copy()
+    bank = FollowerBank({"a": template, "b": other})
+    default = default_sigma(template, pooled=[template, other])[0]
+    assert 0.25 < noise[0] / default[0] < 1.0  # channel 0 is not clipped
+    expect = np.clip(noise, 0.25 * default, default)
+    np.testing.assert_allclose(bank.exact_sigmas, np.stack([expect, expect]), rtol=0.1)
+    assert noise_sigma(template[:2]).tolist() == [0.0, 0.0, 0.0]
 
 
 def test_bank_mixture_tells_apart_replays_that_differ_by_less_than_the_tolerance(rng):

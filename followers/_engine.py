@@ -110,7 +110,6 @@ class ForwardEngine:
             axis=1), dtype=np.int64)
         self.speed_change = np.ascontiguousarray(transitions.speed_change, dtype=np.float64)
         self.initial_speed = np.ascontiguousarray(transitions.initial_speed, dtype=np.float64)
-        self.restart = float(transitions.restart)
         lo = self.templates.min(axis=0)
         hi = self.templates.max(axis=0)
         span = _CLAMP_SPAN * (hi - lo + self.sigmas.max(axis=0))
@@ -118,6 +117,9 @@ class ForwardEngine:
         self.upper = hi + span
 
         K = len(templates)
+        # per template: [restart from anywhere, restart from the last state] per frame (a bank
+        # raises the first for the followers of actions not being performed)
+        self.restart = np.tile([transitions.restart_anywhere, transitions.restart], (K, 1))
         S = int(self.lengths.sum())
         M = transitions.levels
         self.alpha = np.zeros((2, S, M))

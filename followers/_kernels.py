@@ -285,7 +285,11 @@ def template_step(k, templates, offsets, lengths, half_windows, weights, log_nor
     p = half_windows[k]
     mt = main[k]
     et = 1 - mt
-    use_entry = restart > 0.0
+    # restart (K, 2): per frame, the probability of a new repetition from anywhere (an
+    # abandoned one, a late start) and from the absorbing last state (the current one is over)
+    r_any = restart[k, 0]
+    r_end = restart[k, 1]
+    use_entry = r_any > 0.0 or r_end > 0.0
 
     if not fresh[k]:
         if moments[k, 0, 0] + moments[k, 1, 0] <= 0.0:
@@ -309,7 +313,7 @@ def template_step(k, templates, offsets, lengths, half_windows, weights, log_nor
         support[k, mt, 1] = 0
         fresh[k] = False
     else:
-        keep = 1.0 - restart
+        keep = 1.0 - r_any
         for t in range(2):
             first = support[k, t, 0]
             last = support[k, t, 1]
@@ -347,10 +351,18 @@ def template_step(k, templates, offsets, lengths, half_windows, weights, log_nor
             support[k, t, 0] = kept_lo
             support[k, t, 1] = top
         if use_entry:
-            # a new repetition starts at the first state (mass before this frame was 1)
+            # a new repetition starts at the first state (mass before this frame was 1): with
+            # r_any from anywhere, with r_end out of the main track's last state
+            seed = r_any
+            last = off + T - 1
+            if r_end > 0.0 and support[k, mt, 1] == T - 1 and rowsum[mt, last] > 0.0:
+                seed += r_end * rowsum[mt, last]
+                for m in range(M):
+                    alpha[mt, last, m] *= 1.0 - r_end
+                rowsum[mt, last] *= 1.0 - r_end
             total = 0.0
             for m in range(M):
-                v = restart * initial_speed[m]
+                v = seed * initial_speed[m]
                 alpha[et, off, m] += v
                 total += v
             rowsum[et, off] += total

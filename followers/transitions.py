@@ -4,8 +4,9 @@ Every model here is one shape that the forward kernels understand: the hidden st
 template position ``i`` (one state per template frame) and a *speed level* ``m``.
 Each frame the speed level may change (tridiagonal ``speed_change``), then the position
 advances by ``a`` states with probability ``advance[m, a]``; whatever would pass the last
-state stays there (the last state is absorbing). Optionally, with probability ``restart``
-per frame, a new repetition begins at the first state with the initial speed distribution.
+state stays there (the last state is absorbing). Optionally, a new repetition begins at the
+first state with the initial speed distribution: with probability ``restart`` per frame out of
+the last state (the current repetition is over) and ``restart_anywhere`` from any state.
 
 - ``"mop"`` — the paper's chain, to the letter: one speed level whose advance is
   0 or 1 state with probability 0.5 each, no restart.
@@ -19,8 +20,12 @@ per frame, a new repetition begins at the first state with the initial speed dis
   speed in the range equally likely (``speed_prior="uniform"``, a density flat in speed:
   level weights proportional to their speed on the log grid) or with every level equally
   likely (``"log-uniform"``, flat in log speed, which favours the slow half of the range).
-  A restart probability of 1e-3 per frame lets a new repetition (or a performer who starts
-  late) be picked up at any time.
+  A new repetition begins from the last state with probability 1e-3 per frame, and by
+  default not from anywhere else (``restart_anywhere=0``; it was 1e-3 from every state until
+  revision 10, and on repetitive real data, BasicMotions' walking and running or the Wiimote
+  gestures, a single fast multi-channel frame could then throw the follower back to the start
+  mid-gesture: p95 progress error 50-56 % at 0.5x). A repetition abandoned halfway is
+  picked up again once the follower has run out its template.
   ``resolution=R`` optionally upsamples the template to R states per frame (finer positions
   for slow performers, R times the work; measured no better on GunPoint, so off by default).
 - ``"skip"`` — one speed level with skip transitions of 0–3 states (a memoryless
@@ -47,7 +52,9 @@ class TransitionModel:
         is 1 / resolution template frames
     speed_change : (M, 3) float: P(level m -> m - 1, m, m + 1); rows sum to 1
     initial_speed : (M,) float: distribution of the speed level at the first frame
-    restart : float in [0, 1): per-frame probability that a new repetition begins
+    restart : float in [0, 1): per-frame probability that a new repetition begins, out of the
+        last state
+    restart_anywhere : float in [0, 1): the same, out of every state
     resolution : int >= 1: HMM states per template frame. With 2, the template is linearly
         upsampled and a performer at 0.5x advances exactly one state per frame instead of
         0 or 1 at random.
@@ -60,6 +67,7 @@ class TransitionModel:
     initial_speed: np.ndarray
     restart: float
     resolution: int = 1
+    restart_anywhere: float = 0.0
 
     @property
     def levels(self) -> int:
@@ -82,12 +90,15 @@ def _fractional_advance(speeds: np.ndarray) -> np.ndarray:
 
 
 SPEED_PRIORS = ("uniform", "log-uniform")
+DEFAULT_RESTART = 1e-3
+DEFAULT_RESTART_ANYWHERE = 0.0
 
 
 def transition_model(kind: str = "speed", *, min_speed: float = 0.4, max_speed: float = 2.5,
                      levels: int = 11, speed_jitter: float = 0.01, speed_prior: str = "uniform",
                      resolution: int | None = None,
-                     restart: float | None = None) -> TransitionModel:
+                     restart: float | None = None,
+                     restart_anywhere: float | None = None) -> TransitionModel:
     """Build a transition model by name.
 
     Parameters
@@ -101,15 +112,24 @@ def transition_model(kind: str = "speed", *, min_speed: float = 0.4, max_speed: 
     resolution : int >= 1 or None: states per template frame ("speed"; default 1). "mop" and
         "skip" always use 1 (one state per frame, as in the paper).
     restart : float in [0, 1) or None: per-frame probability of a new repetition starting at the
-        first state. None means 1e-3 for "speed" and "skip", 0 for "mop" (the paper has none).
+        first state once the current one is over (out of the absorbing last state). None means
+        1e-3 for "speed" and "skip", 0 for "mop" (the paper has none).
+    restart_anywhere : float in [0, 1) or None: the same from any state (an abandoned
+        repetition picked up at once; a jump back to the start mid-gesture when a frame fits
+        the current repetition badly). None means 0. A ``FollowerBank`` sets its own per
+        follower (``active_restart``).
     """
     if not isinstance(kind, str) or kind not in TRANSITION_KINDS:
         raise ValueError(f"transitions must be one of {TRANSITION_KINDS}, got {kind!r}")
     if restart is None:
-        restart = 0.0 if kind == "mop" else 1e-3
+        restart = 0.0 if kind == "mop" else DEFAULT_RESTART
+    if restart_anywhere is None:
+        restart_anywhere = 0.0 if kind == "mop" else DEFAULT_RESTART_ANYWHERE
     restart = float(restart)
-    if not 0.0 <= restart < 1.0:
-        raise ValueError(f"restart must be a probability in [0, 1), got {restart}")
+    restart_anywhere = float(restart_anywhere)
+    for name, value in (("restart", restart), ("restart_anywhere", restart_anywhere)):
+        if not 0.0 <= value < 1.0:
+            raise ValueError(f"{name} must be a probability in [0, 1), got {value}")
     if kind != "speed" and resolution not in (None, 1):
         raise ValueError(f"resolution applies to 'speed' transitions only, got {resolution} "
                          f"with {kind!r}")
@@ -154,4 +174,5 @@ def transition_model(kind: str = "speed", *, min_speed: float = 0.4, max_speed: 
         arr.setflags(write=False)
     return TransitionModel(kind=kind, speeds=speeds, advance=np.ascontiguousarray(advance),
                            speed_change=np.ascontiguousarray(change),
-                           initial_speed=initial, restart=restart, resolution=int(resolution))
+                           initial_speed=initial, restart=restart, resolution=int(resolution),
+                           restart_anywhere=restart_anywhere)

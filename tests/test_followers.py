@@ -133,7 +133,8 @@ def test_speed_transitions_match_dense_hmm(rng):
     (restart off and a full window, so nothing is truncated; pruning drops < 1e-8)."""
     T, D = 25, 2
     template = random_template(rng, T, D)
-    model = transition_model("speed", restart=0.0, levels=4, resolution=1)
+    model = transition_model("speed", restart=0.0, restart_anywhere=0.0, levels=4,
+                             resolution=1)
     M = model.levels
     A = model.max_advance
     X = template[np.clip(np.round(np.arange(30) * 1.3).astype(int), 0, T - 1)]
@@ -254,6 +255,26 @@ def test_progress_saturates_and_a_new_repetition_starts_afresh(rng):
     assert np.median(np.abs(second - truth)[10:]) < 0.03
 
 
+def test_a_repetition_abandoned_halfway_is_picked_up_again(rng):
+    """By default a new repetition begins only from the template's end: a performer who stops
+    halfway and starts over is followed again once the follower has run out its template (on
+    input that explains none of it, at its speed prior's pace), and with ``restart_anywhere``
+    at once. Out-of-range rates raise."""
+    template = random_template(rng, 60, 3, scale=2.0)
+    half = template[:30]
+    performance = np.vstack([half, template]) + rng.normal(scale=0.05, size=(90, 3))
+    default = Follower(template).follow(performance).progress
+    anywhere = Follower(template, transitions=transition_model(restart_anywhere=1e-3)).follow(
+        performance).progress
+    truth = np.arange(60) / 59
+    assert np.median(np.abs(default[60:] - truth[30:])) < 0.03  # the second half of the take
+    assert np.median(np.abs(anywhere[40:] - truth[10:])) < 0.03
+    assert np.median(np.abs(default[40:50] - truth[10:20])) > 0.2  # still running out the first
+    for name in ("restart", "restart_anywhere"):
+        with pytest.raises(ValueError, match=f"{name} must be a probability"):
+            transition_model(**{name: 1.0})
+
+
 def test_speed_model_follows_twice_as_fast_where_mop_cannot(rng):
     template = random_template(rng, 120, 3, scale=2.0)
     performance, truth = time_warp(template, 2.0)
@@ -284,7 +305,7 @@ def test_held_pose_advances_at_the_speed_priors_mean(prior):
     sum over frames of the mean speed, the level distribution moved by the jitter each frame.
     Over 0.4-2.5x a prior flat in speed starts at a mean of 1.55x (levels weighted by their
     speed), one flat in log speed at 1.18x (levels equally likely)."""
-    model = transition_model("speed", speed_prior=prior, restart=0.0)
+    model = transition_model("speed", speed_prior=prior, restart=0.0, restart_anywhere=0.0)
     speeds = np.geomspace(0.4, 2.5, 11)
     weights = speeds if prior == "uniform" else np.ones(11)
     np.testing.assert_allclose(model.speeds, speeds)

@@ -221,16 +221,19 @@ def progress(args):
                          ("BasicMotions train takes (6 ch, 100 frames)", motions)):
         say(f"{label}, default follower:")
         others += progress_rows(takes[:20] if args.quick else takes, rng)
-    allspeeds = [summary[("speed", s)] for s in (0.5, 1.0, 1.5, 2.0)]
-    say(f"targets ('speed', all speeds): median <= 2 %: "
-        f"{'met' if max(a[0] for a in allspeeds) <= 2 else 'NOT met'}; p95 <= 5 %: "
-        f"{'met' if max(a[1] for a in allspeeds) <= 5 else 'NOT met'}; coverage 85-95 %: "
-        f"{'met' if all(0.85 <= a[2] <= 0.95 for a in allspeeds) else 'NOT met'}")
-    say(f"targets on the other two sets: median <= 2 %: "
-        f"{'met' if max(a[0] for a in others) <= 2 else 'NOT met'}; p95 <= 5 %: "
-        f"{'met' if max(a[1] for a in others) <= 5 else 'NOT met'}; coverage 85-95 %: "
-        f"{'met' if all(0.85 <= a[2] <= 0.95 for a in others) else 'NOT met'} "
-        f"({100 * min(a[2] for a in others):.1f}-{100 * max(a[2] for a in others):.1f} %)")
+    say_targets("targets ('speed', all speeds)",
+                [summary[("speed", s)] for s in (0.5, 1.0, 1.5, 2.0)])
+    say_targets("targets on the other two sets", others)
+
+
+def say_targets(label, rows):
+    """One line: the issue's progress targets against rows of (median [%], p95 [%],
+    coverage [0-1])."""
+    coverage = [a[2] for a in rows]
+    say(f"{label}: median <= 2 %: {'met' if max(a[0] for a in rows) <= 2 else 'NOT met'}; "
+        f"p95 <= 5 %: {'met' if max(a[1] for a in rows) <= 5 else 'NOT met'}; coverage "
+        f"85-95 %: {'met' if all(0.85 <= c <= 0.95 for c in coverage) else 'NOT met'} "
+        f"({100 * min(coverage):.1f}-{100 * max(coverage):.1f} %)")
 
 
 # ---- recognition, rejection and the XMM-style baseline -------------------------------------------

@@ -118,7 +118,7 @@ class ForwardEngine:
 
         K = len(templates)
         # per template: [restart from anywhere, restart from the last state] per frame (a bank
-        # raises the first for the followers of actions not being performed)
+        # sets the first per follower: FollowerBank._gate_restarts)
         self.restart = np.tile([transitions.restart_anywhere, transitions.restart], (K, 1))
         S = int(self.lengths.sum())
         M = transitions.levels

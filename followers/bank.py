@@ -176,7 +176,7 @@ OUTLINE_RESTART = 1e-3
 # progress more than 20 % off: 1e-3: 3.61 / 0.69 / 0.57 %; 1e-5: 0.82 / 0.20 / 0 %; 0: 0.03 /
 # 0 / 0 %. But other sessions' takes of a repetitive activity need the restart to re-align
 # (the benchmark's BasicMotions bank.action after 25 / 50 / 100 %: 1e-3: 79.4 / 81.2 / 78.4 %,
-# 1e-5: 79.6 / 80.2 / 77.1 %, 0: 79.0 / 76.9 / 73.0 %; Wiimote test split 41.6 / 46.4 / 35.6
+# 1e-5: 79.6 / 80.2 / 77.1 %, 0: 79.0 / 76.9 / 73.0 %; Wiimote test split 41.6 / 46.4 / 36.4
 # against 41.6 / 45.2 / 34.0 % with 0), so the default stays at 1e-3, as before revision 10
 ACTIVE_RESTART = 1e-3
 
@@ -562,12 +562,14 @@ class FollowerBank:
         self._gate_restarts(-1)
         self._publish()
 
-    def _gate_restarts(self, active: int) -> None:
+    def _gate_restarts(self, shown: int) -> None:
+        """Restart rates from anywhere for the next frame: the shown action's follower (index
+        ``shown``, -1: none) gets the active rate, every other follower the idle one."""
         restart = self._engine.restart
         restart[:, 0] = self._idle_restart
-        if active >= 0:
-            restart[active, 0] = self._active_restart
-        self._gated = active
+        if shown >= 0:
+            restart[shown, 0] = self._active_restart
+        self._gated = shown
 
     def step(self, x) -> BankOutput:
         """Follow one frame ``x (D,) float`` (NaN = missing channel) with every follower.

@@ -124,7 +124,7 @@ def transition_model(kind: str = "speed", *, min_speed: float = 0.4, max_speed: 
     if restart is None:
         restart = 0.0 if kind == "mop" else DEFAULT_RESTART
     if restart_anywhere is None:
-        restart_anywhere = 0.0 if kind == "mop" else DEFAULT_RESTART_ANYWHERE
+        restart_anywhere = DEFAULT_RESTART_ANYWHERE
     restart = float(restart)
     restart_anywhere = float(restart_anywhere)
     for name, value in (("restart", restart), ("restart_anywhere", restart_anywhere)):

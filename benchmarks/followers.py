@@ -224,6 +224,37 @@ def progress(args):
     say_targets("targets ('speed', all speeds)",
                 [summary[("speed", s)] for s in (0.5, 1.0, 1.5, 2.0)])
     say_targets("targets on the other two sets", others)
+    bank_progress(motions, load_basic_motions(return_X_y=True)[2].astype(str), args.quick)
+
+
+def bank_progress(motions, labels, quick):
+    """The bank's shown progress (what drives a puppet's motion) on BasicMotions: one take
+    per activity drawn as the bank's templates, each performed again as in `perform`; frames
+    where the bank shows the right action. With and without placing the position inside a
+    state's cell (revision 11, ``subframe``)."""
+    say("the bank's shown progress, BasicMotions (a take per activity, each performed again "
+        "twice, frames showing the right action): median / p95 error, coverage")
+    classes = sorted(set(labels))
+    for subframe in (True, False):
+        rng = np.random.default_rng(3)
+        for speed in (0.5, 1.0, 2.0):
+            errors, inside = [], []
+            for _ in range(2 if quick else 4):
+                pick = [int(rng.choice(np.nonzero(labels == c)[0])) for c in classes]
+                normed, _ = normalise([motions[i] for i in pick])
+                bank = FollowerBank(dict(zip(classes, normed)), subframe=subframe)
+                for index, template in enumerate(normed):
+                    for _ in range(2):
+                        performance, truth = perform(template, speed, rng)
+                        result = bank.follow(performance)
+                        shown = result["action"] == index
+                        error = np.abs(result["progress"] - truth)[shown] * 100
+                        errors.append(error)
+                        inside.append(error <= 1.645 * np.sqrt(result["variance"][shown]) * 100)
+            e = np.concatenate(errors)
+            coverage = 100 * np.mean(np.concatenate(inside))
+            say(f"  subframe={str(subframe):<5} | {speed:>4}x | {np.median(e):5.2f} % | "
+                f"{np.percentile(e, 95):6.2f} % | coverage {coverage:5.1f} %")
 
 
 def say_targets(label, rows):

@@ -45,13 +45,18 @@ class ForwardEngine:
     scale_adaptation : (memory [frames], prior [frames], lowest, highest scale) or None: learn
         each follower's emission scale online (sigma x scale, EM on one scalar per template,
         see ``_kernels.template_step``); None keeps sigma as given
+    subframe : report each follower's position inside its states' cells (``subframe (K,)``,
+        settable per follower); report_adaptation : as scale_adaptation, for the emission
+        scale of that report (None: the recursion's scale)
     """
 
     def __init__(self, templates: list[np.ndarray], sigmas: list[np.ndarray], windows: np.ndarray,
                  transitions: TransitionModel, *, cap: float, prune: float,
                  recognition_sigmas: list[np.ndarray] | None = None,
                  recognition_mixture: tuple[float, float | np.ndarray] | None = None,
-                 scale_adaptation: tuple[float, float, float, float] | None = None):
+                 scale_adaptation: tuple[float, float, float, float] | None = None,
+                 subframe: bool = False,
+                 report_adaptation: tuple[float, float, float, float] | None = None):
         R = transitions.resolution
         if R > 1:
             # R states per template frame: the template and its sigma, linearly interpolated
@@ -118,7 +123,7 @@ class ForwardEngine:
 
         K = len(templates)
         # per template: [restart from anywhere, restart from the last state] per frame (a bank
-        # sets the first per follower: FollowerBank._gate_restarts)
+        # sets the first per follower: FollowerBank._gate_shown)
         self.restart = np.tile([transitions.restart_anywhere, transitions.restart], (K, 1))
         S = int(self.lengths.sum())
         M = transitions.levels
@@ -135,18 +140,24 @@ class ForwardEngine:
         self._observed = np.zeros(self.channels)
         self._mix = np.zeros(M)
         self.residual = np.zeros(S)
-        self.scale2 = np.ones(K)
-        self.scale_weight = np.zeros(K)
-        if scale_adaptation is None:
-            self.adapt = np.zeros(3)
-            self._scale_prior = 0.0
-        else:
-            memory, prior, lowest, highest = (float(v) for v in scale_adaptation)
+        # per template: report the position inside each state's cell (see
+        # ``_kernels._subframe_rows``); a bank turns it on for the shown action's follower only
+        self.subframe = np.full(K, bool(subframe))
+        self._sub = np.zeros((4, S))
+        self.scale2 = np.ones((2, K))
+        self.scale_weight = np.zeros((2, K))
+        # scale adaptation of the recursion (row 0) and of the report inside a cell (row 1)
+        self.adapt = np.zeros((2, 3))
+        self._scale_prior = np.zeros((2, 1))
+        for row, setting in enumerate((scale_adaptation, report_adaptation)):
+            if setting is None:
+                continue
+            memory, prior, lowest, highest = (float(v) for v in setting)
             if not (memory > 0 and prior >= 0 and 0 < lowest <= 1.0 <= highest):
-                raise ValueError(f"scale_adaptation needs memory > 0, prior >= 0 and "
-                                 f"0 < lowest <= 1 <= highest, got {scale_adaptation}")
-            self.adapt = np.array([np.exp(-1.0 / memory), lowest ** 2, highest ** 2])
-            self._scale_prior = prior
+                raise ValueError(f"scale adaptation needs memory > 0, prior >= 0 and "
+                                 f"0 < lowest <= 1 <= highest, got {setting}")
+            self.adapt[row] = [np.exp(-1.0 / memory), lowest ** 2, highest ** 2]
+            self._scale_prior[row] = prior
         self.reset()
 
     @property
@@ -183,7 +194,7 @@ class ForwardEngine:
             self.initial_speed, self.restart,
             self.alpha, self.rowsum, self.logb, self.support, self.moments, self.main, self.fresh,
             self.loglik, self.frame_loglik, self._xs, self._observed, self._mix, self.adapt,
-            self.scale2, self.scale_weight, self.residual)
+            self.scale2, self.scale_weight, self.residual, self.subframe, self._sub)
 
     def run(self, X: np.ndarray):
         """Step through ``X (N, D) float64``; returns progress, variance, log-likelihood, each
@@ -201,7 +212,8 @@ class ForwardEngine:
             self.initial_speed, self.restart,
             self.alpha, self.rowsum, self.logb, self.support, self.moments, self.main, self.fresh,
             self.loglik, self.frame_loglik, self._xs, self._observed, self._mix, self.adapt,
-            self.scale2, self.scale_weight, self.residual, progress, variance, loglik)
+            self.scale2, self.scale_weight, self.residual, self.subframe, self._sub, progress,
+            variance, loglik)
         return progress, variance, loglik
 
     def progress_of(self, k: int) -> tuple[float, float]:

@@ -16,9 +16,11 @@ Layout shared by every kernel (K templates stacked, ``S = sum(T_k)`` states in a
   recognition model (row 1; a copy of row 0 unless ``dual``). With ``mixture = w > 0`` the
   recognition model is a two-component mixture per state: weight ``w`` on model 2 (the narrow
   one: an exact repetition) and ``1 - w`` on model 1 (another performance).
-- ``adapt (3,) float64``: [forgetting factor, lowest, highest scale**2] of the emission scale
-  learned online (factor 0: fixed); ``scale2 (K,)``: each template's current scale**2, which
-  multiplies model 0's sigma**2; ``scale_weight (K,)``: the forgetful count behind it;
+- ``adapt (2, 3) float64``: [forgetting factor, lowest, highest scale**2] of the emission
+  scales learned online (factor 0: fixed); ``scale2 (2, K)``: each template's current
+  scale**2, which multiplies model 0's sigma**2; ``scale_weight (2, K)``: the forgetful counts
+  behind them. Row 0 is the recursion's scale, row 1 the report's: the position inside a
+  state's cell (``subframe (K,) bool``, scratch ``sub (4, S)``: see ``_subframe_rows``).
   ``residual (S,)``: scratch, each state's capped sum of squared z-scores this frame.
 
 The emission of state ``j`` is ``sum over observed channels d`` of
@@ -219,6 +221,185 @@ def _moments(rowsum, track, off, first, last):
     return mass, mean, var / mass
 
 
+_SQRT2 = math.sqrt(2.0)
+TILT = 10.0
+_LOG_SQRT_2PI = 0.5 * math.log(2.0 * math.pi)
+
+
+@nb.njit(cache=True)
+def _truncated_exponential(rate, h):
+    """v in [0, h] with density proportional to exp(-rate v), rate > 0: (log of the integral of
+    exp(-rate v) over [0, h], mean, mean square)."""
+    q = math.exp(-rate * h)
+    ratio = q / (1.0 - q)
+    return (math.log1p(-q) - math.log(rate), 1.0 / rate - h * ratio,
+            2.0 / (rate * rate) - (h * h + 2.0 * h / rate) * ratio)
+
+
+@nb.njit(cache=True)
+def _half_cell(a, n, h):
+    """v in [0, h] with density proportional to exp(a v - n v**2 / 2), n >= 0 (the position
+    posterior along one template segment): (log of its integral, mean, mean square)."""
+    if n * h * h < 1e-8:
+        # (nearly) no curvature over the interval: a truncated exponential, or uniform
+        if abs(a * h) < 1e-6:
+            return math.log(h), 0.5 * h, h * h / 3.0
+        if a < 0.0:
+            return _truncated_exponential(-a, h)
+        logz, mean, square = _truncated_exponential(a, h)
+        return a * h + logz, h - mean, h * h - 2.0 * h * mean + square
+    s = 1.0 / math.sqrt(n)
+    m = a / n
+    lo = -m / s
+    hi = (h - m) / s
+    if lo > 35.0 or hi < -35.0:
+        # the mode lies far outside (erfc would underflow): only the Gaussian's tail is inside,
+        # an exponential from the nearer end, its curvature to first order (c: about the
+        # distance in standard deviations to the power -2)
+        slope = a if lo > 35.0 else n * h - a
+        logz, mean, square = _truncated_exponential(-slope, h)
+        c = n / (slope * slope)
+        logz += math.log1p(-c)
+        mean *= 1.0 - 2.0 * c
+        square *= 1.0 - 5.0 * c
+        if lo > 35.0:
+            return logz, mean, square
+        return a * h - 0.5 * n * h * h + logz, h - mean, h * h - 2.0 * h * mean + square
+    if lo > 0.0:
+        z = 0.5 * (math.erfc(lo / _SQRT2) - math.erfc(hi / _SQRT2))
+    elif hi < 0.0:
+        z = 0.5 * (math.erfc(-hi / _SQRT2) - math.erfc(-lo / _SQRT2))
+    else:
+        z = 0.5 * (math.erf(hi / _SQRT2) - math.erf(lo / _SQRT2))
+    if not z > 0.0:
+        return -np.inf, 0.5 * h, h * h / 3.0
+    phi_lo = math.exp(-0.5 * lo * lo) / math.sqrt(2.0 * math.pi)
+    phi_hi = math.exp(-0.5 * hi * hi) / math.sqrt(2.0 * math.pi)
+    shift = (phi_lo - phi_hi) / z
+    mean = m + s * shift
+    var = s * s * (1.0 + (lo * phi_lo - hi * phi_hi) / z - shift * shift)
+    if mean < 0.0:
+        mean = 0.0
+    elif mean > h:
+        mean = h
+    if var < 0.0:
+        var = 0.0
+    return 0.5 * a * m + math.log(s) + _LOG_SQRT_2PI + math.log(z), mean, var + mean * mean
+
+
+@nb.njit(cache=True)
+def _segment(templates, weights, xs, observed, cap, inv_scale2, j, other):
+    """(a, n) of the squared z-distance from x to the point u of the way from template row j to
+    row ``other``: ``r_j - 2 a u + n u**2``, over the observed channels not at the cap."""
+    a = 0.0
+    n = 0.0
+    for d in range(xs.shape[0]):
+        w = weights[0, j, d] * observed[d] * inv_scale2
+        diff = xs[d] - templates[j, d]
+        if w * diff * diff < cap:
+            step = templates[other, d] - templates[j, d]
+            a += w * diff * step
+            n += w * step * step
+    return a, n
+
+
+@nb.njit(cache=True)
+def _tilt(rowsum, logb, track, r, other):
+    v = rowsum[track, other]
+    if v <= 0.0:
+        return -TILT
+    c = math.log(v / rowsum[track, r]) - (logb[0, other] - logb[0, r])
+    return -TILT if c < -TILT else (TILT if c > TILT else c)
+
+
+@nb.njit(cache=True)
+def _subframe_rows(templates, weights, xs, observed, cap, inv_scale2, in_report, residual,
+                   rowsum, logb, track, off, T, first, last, sub):
+    """Where inside its cell each state of a track puts the performer: the positions within
+    half a frame of the state along the template's straight segments to its neighbours,
+    weighted by this frame's emission there (at the report's scale, ``inv_scale2``) and by
+    the prediction's slope across the cell (``_tilt``: the predicted masses interpolated
+    log-linearly).
+
+    sub (4, S) float64 out, for the rows of states holding more than 1e-6 (others 0): the
+    mean offset [states], its mean square, the change of the expected squared z-distance
+    (``residual``) against the state's own point, and the weight of the cell (its state's
+    mass, the point emission of the recursion swapped for the report's emission integrated
+    over the cell; ``in_report``: the recursion's scale**2 over the report's; summing to 1).
+    The first and last states keep their position (progress stays 0 at rest and 1 at the end)
+    and add only their spread towards their one neighbour."""
+    top_weight = -np.inf
+    for j in range(first, last + 1):
+        r = off + j
+        sub[0, r] = 0.0
+        sub[1, r] = 0.0
+        sub[2, r] = 0.0
+        sub[3, r] = -np.inf
+        if rowsum[track, r] <= 1e-6:
+            continue
+        log_f = log_b = mean_f = mean_b = square_f = square_b = 0.0
+        a_f = n_f = a_b = n_b = 0.0
+        if j + 1 < T:
+            a_f, n_f = _segment(templates, weights, xs, observed, cap, inv_scale2, r, r + 1)
+            log_f, mean_f, square_f = _half_cell(a_f + _tilt(rowsum, logb, track, r, r + 1),
+                                                 n_f, 0.5)
+        if j > 0:
+            a_b, n_b = _segment(templates, weights, xs, observed, cap, inv_scale2, r, r - 1)
+            log_b, mean_b, square_b = _half_cell(a_b + _tilt(rowsum, logb, track, r, r - 1),
+                                                 n_b, 0.5)
+        if 0 < j < T - 1:
+            top = log_f if log_f > log_b else log_b
+            wf = math.exp(log_f - top)
+            wb = math.exp(log_b - top)
+            inv = 1.0 / (wf + wb)
+            sub[0, r] = (wf * mean_f - wb * mean_b) * inv
+            sub[1, r] = (wf * square_f + wb * square_b) * inv
+            sub[2, r] = (wf * (n_f * square_f - 2.0 * a_f * mean_f)
+                         + wb * (n_b * square_b - 2.0 * a_b * mean_b)) * inv
+            cell = top + math.log(wf + wb)
+        elif j == 0:
+            sub[1, r] = square_f
+            cell = log_f
+        else:
+            sub[1, r] = square_b
+            cell = log_b
+        w = math.log(rowsum[track, r]) + 0.5 * residual[r] * (1.0 - in_report) + cell
+        sub[3, r] = w
+        if w > top_weight:
+            top_weight = w
+    total = 0.0
+    for j in range(first, last + 1):
+        r = off + j
+        w = math.exp(sub[3, r] - top_weight) if sub[3, r] > -np.inf else 0.0
+        sub[3, r] = w
+        total += w
+    if total > 0.0:
+        for j in range(first, last + 1):
+            sub[3, off + j] /= total
+
+
+@nb.njit(cache=True)
+def _subframe_moments(sub, off, first, last):
+    """Like ``_moments``, each state standing for its cell as ``_subframe_rows`` placed and
+    weighted it."""
+    mass = 0.0
+    mean = 0.0
+    square = 0.0
+    for j in range(first, last + 1):
+        r = off + j
+        v = sub[3, r]
+        mass += v
+        # positions relative to the first state keep the sums small
+        at = j - first + sub[0, r]
+        mean += v * at
+        square += v * (at * at + sub[1, r] - sub[0, r] * sub[0, r])
+    if mass <= 0.0:
+        return 0.0, 0.0, 0.0
+    mean /= mass
+    var = square / mass - mean * mean
+    return mass, first + mean, var if var > 0.0 else 0.0
+
+
 @nb.njit(cache=True)
 def _argmax_row(rowsum, track, off, first, last):
     best = first
@@ -267,7 +448,7 @@ def template_step(k, templates, offsets, lengths, half_windows, weights, log_nor
                   xs, observed, n_obs, cap, dual, mixture, exact_inv2, exact_log, prune,
                   advance, advance_tail, advance_range, speed_change, initial_speed, restart,
                   alpha, rowsum, logb, support, moments, main, fresh, loglik, frame_loglik, mix,
-                  adapt, scale2, scale_weight, residual):
+                  adapt, scale2, scale_weight, residual, subframe, sub):
     """One frame of the windowed forward algorithm for template ``k`` (see the module docstring
     for the layout). ``weights (2, S, D)``: 1 / sigma**2 per model and state; ``log_norm
     (2, S, D)``: -0.5 log(2 pi sigma**2), ``log_norm_sum (2, S)`` its sum over channels;
@@ -378,7 +559,7 @@ def template_step(k, templates, offsets, lengths, half_windows, weights, log_nor
     has_main = m_last >= m_first
     has_entry = e_last >= e_first
     shift = 0.0
-    s2 = scale2[k]
+    s2 = scale2[0, k]
     inv_scale2 = 1.0 / s2
     norm_shift = -0.5 * n_obs * math.log(s2)
     exact_scale2 = exact_inv2[k]
@@ -473,7 +654,15 @@ def template_step(k, templates, offsets, lengths, half_windows, weights, log_nor
             rowsum[t, r] *= inv
             for m in range(M):
                 alpha[t, r, m] *= inv
-    if adapt[0] > 0.0 and n_obs > 0:
+    refined = subframe[k] and n_obs > 0
+    if refined:
+        if adapt[1, 0] <= 0.0:
+            scale2[1, k] = s2
+        # the reported position, in the units of the report's own scale (below)
+        _subframe_rows(templates, weights, xs, observed, cap, 1.0 / scale2[1, k],
+                       s2 / scale2[1, k], residual, rowsum, logb, mt, off, T, support[k, mt, 0],
+                       support[k, mt, 1], sub)
+    if adapt[0, 0] > 0.0 and n_obs > 0:
         # EM on the emission scale: its maximum-likelihood value given this frame is the
         # posterior-expected squared z-score per channel (in units of the unscaled sigma);
         # a forgetful mean of it over recent frames becomes the scale of the next frames
@@ -482,13 +671,27 @@ def template_step(k, templates, offsets, lengths, half_windows, weights, log_nor
             for j in range(support[k, t, 0], support[k, t, 1] + 1):
                 expected += rowsum[t, off + j] * residual[off + j]
         target = s2 * expected / n_obs
-        scale_weight[k] = adapt[0] * scale_weight[k] + 1.0
-        s2 += (target - s2) / scale_weight[k]
-        if s2 < adapt[1]:
-            s2 = adapt[1]
-        elif s2 > adapt[2]:
-            s2 = adapt[2]
-        scale2[k] = s2
+        scale_weight[0, k] = adapt[0, 0] * scale_weight[0, k] + 1.0
+        new_s2 = s2 + (target - s2) / scale_weight[0, k]
+        scale2[0, k] = min(max(new_s2, adapt[0, 1]), adapt[0, 2])
+    if refined and adapt[1, 0] > 0.0:
+        # the report's scale: the same EM with the performer anywhere along the template's
+        # segments (``_subframe_rows``), over the main track. Between two template frames the
+        # distance to the nearest frame overstates the noise, which the recursion's scale
+        # keeps (it holds on to the track better for it) but the spread reported inside a
+        # cell must not
+        r2 = scale2[1, k]
+        in_report = s2 / r2
+        expected = 0.0
+        mass = 0.0
+        for j in range(support[k, mt, 0], support[k, mt, 1] + 1):
+            v = sub[3, off + j]
+            expected += v * (residual[off + j] * in_report + sub[2, off + j])
+            mass += v
+        if mass > 0.0:
+            scale_weight[1, k] = adapt[1, 0] * scale_weight[1, k] + 1.0
+            r2 += (r2 * expected / (mass * n_obs) - r2) / scale_weight[1, k]
+            scale2[1, k] = min(max(r2, adapt[1, 1]), adapt[1, 2])
     step_ll = math.log(c) + shift
     frame_loglik[0, k] = step_ll
     if not dual:
@@ -538,6 +741,11 @@ def template_step(k, templates, offsets, lengths, half_windows, weights, log_nor
         moments[k, mt, 1] = 0.0
         moments[k, mt, 2] = 0.0
         main[k] = et
+    if refined and main[k] == mt:
+        # the reported position: each state stands for its cell along the template's segments
+        mass, mean, var = _subframe_moments(sub, off, support[k, mt, 0], support[k, mt, 1])
+        moments[k, mt, 1] = mean
+        moments[k, mt, 2] = var
 
 
 @nb.njit(cache=True)
@@ -545,7 +753,7 @@ def bank_step(x, lower, upper, templates, offsets, lengths, half_windows, weight
               log_norm_sum, cap, dual, mixture, exact_inv2, exact_log, prune, advance,
               advance_tail, advance_range, speed_change, initial_speed, restart, alpha, rowsum,
               logb, support, moments, main, fresh, loglik, frame_loglik, xs, observed, mix,
-              adapt, scale2, scale_weight, residual):
+              adapt, scale2, scale_weight, residual, subframe, sub):
     """One frame for all K templates. ``x (D,)`` is the raw input frame. Returns the number of
     observed channels."""
     n_obs = prepare_frame(x, lower, upper, xs, observed)
@@ -554,7 +762,8 @@ def bank_step(x, lower, upper, templates, offsets, lengths, half_windows, weight
                       log_norm_sum, xs, observed, n_obs, cap, dual, mixture, exact_inv2,
                       exact_log, prune, advance, advance_tail, advance_range, speed_change,
                       initial_speed, restart, alpha, rowsum, logb, support, moments, main,
-                      fresh, loglik, frame_loglik, mix, adapt, scale2, scale_weight, residual)
+                      fresh, loglik, frame_loglik, mix, adapt, scale2, scale_weight, residual,
+                      subframe, sub)
     return n_obs
 
 
@@ -563,7 +772,8 @@ def follow_sequence(X, lower, upper, templates, offsets, lengths, half_windows, 
                     log_norm_sum, cap, dual, mixture, exact_inv2, exact_log, prune, advance,
                     advance_tail, advance_range, speed_change, initial_speed, restart, alpha,
                     rowsum, logb, support, moments, main, fresh, loglik, frame_loglik, xs,
-                    observed, mix, adapt, scale2, scale_weight, residual, out_progress,
+                    observed, mix, adapt, scale2, scale_weight, residual, subframe, sub,
+                    out_progress,
                     out_variance, out_loglik):
     """Run ``bank_step`` over the rows of ``X (N, D)``; write each template's main-track
     progress and variance (in [0, 1] units) and cumulative log-likelihood into
@@ -574,7 +784,7 @@ def follow_sequence(X, lower, upper, templates, offsets, lengths, half_windows, 
                   log_norm, log_norm_sum, cap, dual, mixture, exact_inv2, exact_log, prune,
                   advance, advance_tail, advance_range, speed_change, initial_speed, restart,
                   alpha, rowsum, logb, support, moments, main, fresh, loglik, frame_loglik, xs,
-                  observed, mix, adapt, scale2, scale_weight, residual)
+                  observed, mix, adapt, scale2, scale_weight, residual, subframe, sub)
         for k in range(K):
             scale = 1.0 / (lengths[k] - 1)
             t = main[k]

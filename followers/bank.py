@@ -10,7 +10,8 @@ from followers import _bank_kernels
 from followers._engine import ForwardEngine
 from followers.defaults import (as_sigma, as_template, as_window, default_sigma, default_window,
                                 exact_scale, recognition_sigma)
-from followers.follower import PRUNE_MASS, resolve_adaptation, resolve_cap, resolve_transitions
+from followers.follower import (PRUNE_MASS, SCALE_ADAPTATION, resolve_adaptation, resolve_cap,
+                               resolve_subframe, resolve_transitions)
 
 # rejection: a follower accepts the input while it explains the recent frames better than the
 # background model by this many nats per channel per frame, give or take the hysteresis
@@ -309,6 +310,10 @@ class FollowerBank:
         None: ``ACTIVE_RESTART`` (1e-3), which re-aligns another session's take of a
         repetitive activity; 0 keeps the shown progress from ever jumping back to the start
         mid-gesture, at a cost in recognising such takes (see ``ACTIVE_RESTART``).
+    subframe : bool or None: as for :class:`followers.Follower`, for the shown action's
+        follower (the others report which state, as placing the position inside a cell costs
+        as much as their emission when their posterior is spread). Default: on, off for
+        ``"mop"``.
 
     The whole bank is one kernel call per frame (all templates stacked in one array).
     """
@@ -319,7 +324,7 @@ class FollowerBank:
                  adapt_sigma=False, pace_weight: float = 0.0,
                  outline_weight: float = OUTLINE_WEIGHT,
                  recognition_mixture: float = RECOGNITION_MIXTURE,
-                 active_restart: float | None = None):
+                 active_restart: float | None = None, subframe=None):
         items = list(templates.items()) if isinstance(templates, Mapping) else list(templates)
         if not items:
             raise ValueError("a FollowerBank needs at least one template, got none")
@@ -404,7 +409,11 @@ class FollowerBank:
                                      recognition_sigmas=recognition,
                                      recognition_mixture=mixture,
                                      scale_adaptation=resolve_adaptation(
-                                         adapt_sigma, sigma is not None, model.kind))
+                                         adapt_sigma, sigma is not None, model.kind),
+                                     subframe=False,
+                                     report_adaptation=(None if sigma is not None
+                                                        else SCALE_ADAPTATION))
+        self._subframe = resolve_subframe(subframe, model.kind)
         self._pace_weight = pace_weight
         # the advance is measured in states: R states per template frame
         self._pace_reference = PACE_REFERENCE * self._engine.resolution
@@ -559,16 +568,21 @@ class FollowerBank:
         self._progress[:] = 0.0
         self._variance[:] = 0.0
         self._state[:] = (-1, 0, 0, 0)
-        self._gate_restarts(-1)
+        self._gate_shown(-1)
         self._publish()
 
-    def _gate_restarts(self, shown: int) -> None:
-        """Restart rates from anywhere for the next frame: the shown action's follower (index
-        ``shown``, -1: none) gets the active rate, every other follower the idle one."""
-        restart = self._engine.restart
-        restart[:, 0] = self._idle_restart
+    def _gate_shown(self, shown: int) -> None:
+        """Settings for the next frame that depend on which action is shown (index ``shown``,
+        -1: none): its follower gets the active restart rate from anywhere, every other
+        follower the idle one; only its follower places the position inside each state's cell
+        (``_kernels._subframe_rows``: what is reported, at a cost per frame as large as the
+        emission's when a follower's posterior is spread, as a rejected action's is)."""
+        engine = self._engine
+        engine.restart[:, 0] = self._idle_restart
+        engine.subframe[:] = False
         if shown >= 0:
-            restart[shown, 0] = self._active_restart
+            engine.restart[shown, 0] = self._active_restart
+            engine.subframe[shown] = self._subframe
         self._gated = shown
 
     def step(self, x) -> BankOutput:
@@ -597,7 +611,7 @@ class FollowerBank:
             engine.moments, engine.main, engine.lengths, self._progress, self._variance)
         shown = self._state[0] if self._state[0] >= 0 else self._state[1]
         if shown != self._gated:
-            self._gate_restarts(int(shown))
+            self._gate_shown(int(shown))
         self._publish()
         return self._out
 

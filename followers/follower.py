@@ -23,6 +23,14 @@ PRUNE_MASS = 1e-8
 SCALE_ADAPTATION = (30.0, 0.2, 0.1, 2.0)
 
 
+def resolve_subframe(subframe, kind: str) -> bool:
+    if subframe is None:
+        return kind != "mop"
+    if not isinstance(subframe, (bool, np.bool_)):
+        raise TypeError(f"subframe must be True, False or None, got {subframe!r}")
+    return bool(subframe)
+
+
 def resolve_adaptation(adapt_sigma, sigma_given: bool, kind: str):
     if adapt_sigma is None:
         adapt_sigma = not sigma_given and kind != "mop"
@@ -101,13 +109,23 @@ class Follower:
         sigma is given and for ``"mop"``. With a well-matched scale the posterior's variance
         is calibrated (the 90 % interval holds the true position about 90 % of the time).
 
+    subframe : bool, optional: report the position between template frames. Each state of the
+        posterior stands for its cell (half a frame either side); the performer is placed
+        along the template's straight segments to the neighbouring frames by this frame's
+        emission there, the prediction's slope across the cell as prior
+        (``followers._kernels._subframe_rows``), with its own emission scale learned as the
+        recursion's is. Progress and variance then hold the position inside a cell, not only
+        which cell; the recursion itself is unchanged. Progress stays exactly 0 on the first
+        state and 1 on the last. Default: on, off for ``"mop"`` (the paper's first moment and
+        variance of the state distribution, to the letter).
+
     With ``"mop"`` the window is fixed (equation 7); with the other models, states at the edges
     of the posterior holding less than ``PRUNE_MASS`` are also dropped, so a confident follower
     touches a few states rather than the whole window.
     """
 
     def __init__(self, template, *, sigma=None, window=None, transitions="speed",
-                 outlier_sigmas=None, adapt_sigma=None):
+                 outlier_sigmas=None, adapt_sigma=None, subframe=None):
         tmpl = as_template(template)
         model = resolve_transitions(transitions)
         T, D = tmpl.shape
@@ -118,7 +136,9 @@ class Follower:
             [tmpl], [self._sigma], np.array([self._window]), model,
             cap=resolve_cap(outlier_sigmas, model.kind),
             prune=0.0 if model.kind == "mop" else PRUNE_MASS,
-            scale_adaptation=resolve_adaptation(adapt_sigma, sigma is not None, model.kind))
+            scale_adaptation=resolve_adaptation(adapt_sigma, sigma is not None, model.kind),
+            subframe=resolve_subframe(subframe, model.kind),
+            report_adaptation=None if sigma is not None else SCALE_ADAPTATION)
         self._template = tmpl
         self._template.setflags(write=False)
 
@@ -142,7 +162,7 @@ class Follower:
     def sigma_scale(self) -> float:
         """The emission scale learned online (sigma in use = ``sigma`` x this); 1.0 until the
         first frame, and always 1.0 when the scale is not adapted (``adapt_sigma``)."""
-        return float(math.sqrt(self._engine.scale2[0]))
+        return float(math.sqrt(self._engine.scale2[0, 0]))
 
     @property
     def transitions(self) -> TransitionModel:

@@ -141,7 +141,7 @@ def test_speed_transitions_match_dense_hmm(rng):
     X = X + rng.normal(scale=0.2, size=X.shape)
     X[5, 0] = np.nan
     sigma = 0.5
-    follower = Follower(template, sigma=sigma, window=T, transitions=model)
+    follower = Follower(template, sigma=sigma, window=T, transitions=model, subframe=False)
     trace = follower.follow(X)
 
     n = T * M
@@ -286,6 +286,57 @@ def test_speed_model_follows_twice_as_fast_where_mop_cannot(rng):
     assert mop.progress[-1] < 0.6  # the 0.5/0.5 chain advances at most one state per frame
 
 
+@pytest.mark.parametrize("n", [0.0, 1e-12, 1e-3, 0.7, 40.0, 3e3, 1e6])
+def test_position_inside_a_cell_matches_quadrature(n):
+    """The reported position inside a state's cell: v in [0, 1/2] with density proportional
+    to exp(a v - n v^2 / 2) (the emission along one template segment). Its log-integral, mean
+    and mean square against a fine trapezoid sum, from a flat cell to a needle far outside it
+    (the exponential tails and the near-linear case take other branches). The trapezoid sum
+    itself is good to about 1e-6."""
+    from followers._kernels import _half_cell
+
+    h = 0.5
+    # fine near both ends, where the steep cases keep their mass
+    edge = np.linspace(0.0, 2e-3, 200_001)
+    v = np.unique(np.concatenate([edge, np.linspace(0.0, h, 200_001), h - edge]))
+    for a in (-3e4, -900.0, -40.0, -1.0, -1e-9, 0.0, 2e-7, 0.3, 25.0, 700.0, 2e3, 5e4):
+        logd = a * v - 0.5 * n * v * v
+        top = logd.max()
+        d = np.exp(logd - top)
+        z = np.trapezoid(d, v)
+        mean = np.trapezoid(d * v, v) / z
+        square = np.trapezoid(d * v * v, v) / z
+        got = _half_cell(a, n, h)
+        # beyond 35 standard deviations the tails keep their curvature to first order only
+        assert got[0] == pytest.approx(top + np.log(z), abs=1e-5), (a, n)
+        assert got[1] == pytest.approx(mean, rel=1e-5, abs=1e-9), (a, n)
+        assert got[2] == pytest.approx(square, rel=1e-5, abs=1e-12), (a, n)
+
+
+def test_progress_between_template_frames(rng):
+    """A replay at 0.7x and 1.3x (most frames fall between two template frames), no noise:
+    the position is reported inside a state's cell, to a small fraction of a frame, and the
+    90 % interval still holds the truth. Without it (``subframe=False``, what the state
+    distribution alone says) the error is a fifth of a frame. Progress is exactly 0 on the
+    first frame and settles on exactly 1 while the end is held."""
+    template = random_template(rng, 80, 4, scale=2.0)
+    for speed in (0.7, 1.3):
+        performance, truth = time_warp(template, speed, hold=10)
+        on = Follower(template).follow(performance)
+        off = Follower(template, subframe=False).follow(performance)
+        inner = slice(3, len(performance) - 11)
+        error_on = np.abs(on.progress - truth)[inner] * 79
+        error_off = np.abs(off.progress - truth)[inner] * 79
+        assert np.median(error_on) < 0.05, speed
+        assert np.median(error_off) > max(0.1, 3 * np.median(error_on)), speed
+        assert np.mean(error_on <= 1.645 * np.sqrt(on.variance[inner]) * 79) > 0.85
+        assert on.progress[0] == 0.0
+        assert np.all(on.progress[-10:] > 1.0 - 1e-4)
+        assert np.all(on.progress[-5:] == 1.0)
+    with pytest.raises(TypeError, match="subframe must be True, False or None"):
+        Follower(template, subframe="yes")
+
+
 # ---- validation ---------------------------------------------------------------------------------
 
 def test_wrong_dimension_frame_names_expected_and_given(rng):
@@ -313,7 +364,8 @@ def test_held_pose_advances_at_the_speed_priors_mean(prior):
     assert model.initial_speed @ model.speeds == pytest.approx(
         {"uniform": 1.546, "log-uniform": 1.176}[prior], abs=1e-3)
     T = 400
-    follower = Follower(np.zeros((T, 1)), sigma=1.0, window=T, transitions=model)
+    follower = Follower(np.zeros((T, 1)), sigma=1.0, window=T, transitions=model,
+                        subframe=False)
     assert follower.step(np.zeros(1)).progress == 0.0  # the first frame is the first state
     levels = model.initial_speed.copy()
     travelled = 0.0
@@ -412,6 +464,26 @@ def test_bank_output_is_reused_documented_and_copyable(rng, actions):
     assert sum(first.posterior.values()) == pytest.approx(1.0)
     assert set(first.log_likelihoods) == set(bank.actions)
     assert bank.progresses.shape == bank.posteriors.shape == (3,)
+
+
+def test_bank_reports_the_shown_actions_position_between_template_frames(rng, actions):
+    """The shown action's follower places the performer inside its states' cells, as a lone
+    follower does (``subframe``); the followers not shown report their states (placing costs
+    as much as their emission)."""
+    performance, truth = time_warp(actions["nod"], 0.7, hold=5)
+    performance = performance + rng.normal(scale=0.02, size=performance.shape)
+    errors = {}
+    for subframe in (True, False):
+        bank = FollowerBank(actions, subframe=subframe)
+        result = bank.follow(performance)
+        shown = result["action"] == 1
+        assert shown[10:].all()
+        errors[subframe] = np.median(np.abs(result["progress"] - truth)[shown]) * 89
+        assert not bank._engine.subframe[[0, 2]].any()
+        assert bank._engine.subframe[1] == subframe
+    assert errors[True] < 0.6 * errors[False]
+    with pytest.raises(TypeError, match="subframe must be True, False or None"):
+        FollowerBank(actions, subframe=1)
 
 
 def test_bank_step_does_not_grow_memory(actions, rng):

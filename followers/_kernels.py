@@ -289,18 +289,39 @@ def _half_cell(a, n, h):
 
 @nb.njit(cache=True)
 def _segment(templates, weights, xs, observed, cap, inv_scale2, j, other):
-    """(a, n) of the squared z-distance from x to the point u of the way from template row j to
-    row ``other``: ``r_j - 2 a u + n u**2``, over the observed channels not at the cap."""
+    """The squared z-distance from x to the point u of the way from template row j to row
+    ``other`` is ``r_j - 2 a u + n u**2`` over the observed channels not at the cap (each
+    channel d contributing ``g_d = w_d step_d**2`` to n). Returns (a, n, pa, pb, pc): with
+    them the same distance *along the segment's direction*, each channel's squared z-score
+    weighted by its share ``g_d / n`` of the position's information, is
+    ``(pa - 2 pb u + pc u**2) / n``; the report's scale is learned from that (a position
+    placed by channels that move is only as uncertain as their noise)."""
     a = 0.0
     n = 0.0
+    pa = 0.0
+    pb = 0.0
+    pc = 0.0
     for d in range(xs.shape[0]):
         w = weights[0, j, d] * observed[d] * inv_scale2
         diff = xs[d] - templates[j, d]
         if w * diff * diff < cap:
             step = templates[other, d] - templates[j, d]
             a += w * diff * step
-            n += w * step * step
-    return a, n
+            g = w * step * step
+            n += g
+            pa += g * w * diff * diff
+            pb += g * w * diff * step
+            pc += g * g
+    return a, n, pa, pb, pc
+
+
+@nb.njit(cache=True)
+def _along(pa, pb, pc, n, mean, square):
+    """Expected squared z-score along a segment (``_segment``) under an offset with this mean
+    and mean square; -1 for a segment of zero length (nothing to learn from)."""
+    if not n > 0.0:
+        return -1.0
+    return (pa - 2.0 * mean * pb + square * pc) / n
 
 
 @nb.njit(cache=True)
@@ -322,8 +343,9 @@ def _subframe_rows(templates, weights, xs, observed, cap, inv_scale2, in_report,
     log-linearly).
 
     sub (4, S) float64 out, for the rows of states holding more than 1e-6 (others 0): the
-    mean offset [states], its mean square, the change of the expected squared z-distance
-    (``residual``) against the state's own point, and the weight of the cell (its state's
+    mean offset [states], its mean square, the expected squared z-score along the template's
+    direction there (``_segment``; -1 where a segment has zero length), and the weight of the
+    cell (its state's
     mass, the point emission of the recursion swapped for the report's emission integrated
     over the cell; ``in_report``: the recursion's scale**2 over the report's; summing to 1).
     The first and last states keep their position (progress stays 0 at rest and 1 at the end)
@@ -339,12 +361,15 @@ def _subframe_rows(templates, weights, xs, observed, cap, inv_scale2, in_report,
             continue
         log_f = log_b = mean_f = mean_b = square_f = square_b = 0.0
         a_f = n_f = a_b = n_b = 0.0
+        pa_f = pb_f = pc_f = pa_b = pb_b = pc_b = 0.0
         if j + 1 < T:
-            a_f, n_f = _segment(templates, weights, xs, observed, cap, inv_scale2, r, r + 1)
+            a_f, n_f, pa_f, pb_f, pc_f = _segment(templates, weights, xs, observed, cap,
+                                                  inv_scale2, r, r + 1)
             log_f, mean_f, square_f = _half_cell(a_f + _tilt(rowsum, logb, track, r, r + 1),
                                                  n_f, 0.5)
         if j > 0:
-            a_b, n_b = _segment(templates, weights, xs, observed, cap, inv_scale2, r, r - 1)
+            a_b, n_b, pa_b, pb_b, pc_b = _segment(templates, weights, xs, observed, cap,
+                                                  inv_scale2, r, r - 1)
             log_b, mean_b, square_b = _half_cell(a_b + _tilt(rowsum, logb, track, r, r - 1),
                                                  n_b, 0.5)
         if 0 < j < T - 1:
@@ -354,14 +379,20 @@ def _subframe_rows(templates, weights, xs, observed, cap, inv_scale2, in_report,
             inv = 1.0 / (wf + wb)
             sub[0, r] = (wf * mean_f - wb * mean_b) * inv
             sub[1, r] = (wf * square_f + wb * square_b) * inv
-            sub[2, r] = (wf * (n_f * square_f - 2.0 * a_f * mean_f)
-                         + wb * (n_b * square_b - 2.0 * a_b * mean_b)) * inv
+            along_f = _along(pa_f, pb_f, pc_f, n_f, mean_f, square_f)
+            along_b = _along(pa_b, pb_b, pc_b, n_b, mean_b, square_b)
+            if along_f < 0.0 or along_b < 0.0:
+                sub[2, r] = -1.0
+            else:
+                sub[2, r] = (wf * along_f + wb * along_b) * inv
             cell = top + math.log(wf + wb)
         elif j == 0:
             sub[1, r] = square_f
+            sub[2, r] = _along(pa_f, pb_f, pc_f, n_f, mean_f, square_f)
             cell = log_f
         else:
             sub[1, r] = square_b
+            sub[2, r] = _along(pa_b, pb_b, pc_b, n_b, mean_b, square_b)
             cell = log_b
         w = math.log(rowsum[track, r]) + 0.5 * residual[r] * (1.0 - in_report) + cell
         sub[3, r] = w
@@ -675,22 +706,24 @@ def template_step(k, templates, offsets, lengths, half_windows, weights, log_nor
         new_s2 = s2 + (target - s2) / scale_weight[0, k]
         scale2[0, k] = min(max(new_s2, adapt[0, 1]), adapt[0, 2])
     if refined and adapt[1, 0] > 0.0:
-        # the report's scale: the same EM with the performer anywhere along the template's
-        # segments (``_subframe_rows``), over the main track. Between two template frames the
-        # distance to the nearest frame overstates the noise, which the recursion's scale
-        # keeps (it holds on to the track better for it) but the spread reported inside a
-        # cell must not
+        # the report's scale: EM with the performer anywhere along the template's segments
+        # (``_subframe_rows``), on the squared z-scores along the segments' direction, over the
+        # main track. Between two template frames the distance to the nearest frame overstates
+        # the noise, which the recursion's scale keeps (it holds on to the track better for
+        # it) but the spread reported inside a cell must not; and the channels that place the
+        # performer are the ones that move, whose sigma (estimated from the template's own
+        # variation) is the widest: averaged over all channels, the report's sd ran 1.5x wide
         r2 = scale2[1, k]
-        in_report = s2 / r2
         expected = 0.0
         mass = 0.0
         for j in range(support[k, mt, 0], support[k, mt, 1] + 1):
             v = sub[3, off + j]
-            expected += v * (residual[off + j] * in_report + sub[2, off + j])
-            mass += v
+            if v > 0.0 and sub[2, off + j] >= 0.0:
+                expected += v * sub[2, off + j]
+                mass += v
         if mass > 0.0:
             scale_weight[1, k] = adapt[1, 0] * scale_weight[1, k] + 1.0
-            r2 += (r2 * expected / (mass * n_obs) - r2) / scale_weight[1, k]
+            r2 += (r2 * expected / mass - r2) / scale_weight[1, k]
             scale2[1, k] = min(max(r2, adapt[1, 1]), adapt[1, 2])
     step_ll = math.log(c) + shift
     frame_loglik[0, k] = step_ll

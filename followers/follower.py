@@ -113,10 +113,10 @@ class Follower:
         posterior stands for its cell (half a frame either side); the performer is placed
         along the template's straight segments to the neighbouring frames by this frame's
         emission there, the prediction's slope across the cell as prior
-        (``followers._kernels._subframe_rows``), with its own emission scale learned as the
-        recursion's is. Progress and variance then hold the position inside a cell, not only
-        which cell; the recursion itself is unchanged. Progress stays exactly 0 on the first
-        state and 1 on the last. Default: on, off for ``"mop"`` (the paper's first moment and
+        (``followers._kernels._subframe_rows``), with its own emission scale (learned online
+        along the template's direction when sigma is estimated). Progress and variance then
+        hold the position inside a cell, not only which cell; the recursion itself is
+        unchanged. Progress stays exactly 0 on the first state and 1 on the last. Default: on, off for ``"mop"`` (the paper's first moment and
         variance of the state distribution, to the letter).
 
     With ``"mop"`` the window is fixed (equation 7); with the other models, states at the edges

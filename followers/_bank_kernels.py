@@ -138,7 +138,7 @@ def bank_decide(frame_loglik, outline_ll, outline_weight, xs, observed, n_obs, b
     for k in range(K):
         scale = 1.0 / (lengths[k] - 1)
         t = main[k]
-        progress[k] = moments[k, t, 1] * scale
+        progress[k] = moments[k, t, 1] / (lengths[k] - 1)  # exactly 1 at the end
         variance[k] = moments[k, t, 2] * scale * scale
     if n_obs > 0:
         # the pace is only followed when it counts (pace_weight > 0: off by default)

@@ -220,5 +220,5 @@ class ForwardEngine:
         """Main-track progress and variance of template k, in [0, 1] units."""
         t = self.main[k]
         scale = 1.0 / (self.lengths[k] - 1)
-        return (float(self.moments[k, t, 1] * scale),
+        return (float(self.moments[k, t, 1] / (self.lengths[k] - 1)),  # exactly 1 at the end
                 float(self.moments[k, t, 2] * scale * scale))

@@ -213,7 +213,8 @@ def _moments(rowsum, track, off, first, last):
         mean += v * j
     if mass <= 0.0:
         return 0.0, 0.0, 0.0
-    mean /= mass
+    # rounding must not carry the mean past the support (progress 1 + 2e-16 at the end)
+    mean = min(max(mean / mass, float(first)), float(last))
     var = 0.0
     for j in range(first, last + 1):
         dj = j - mean
@@ -222,6 +223,7 @@ def _moments(rowsum, track, off, first, last):
 
 
 _SQRT2 = math.sqrt(2.0)
+# steepest prior slope across a cell, [nats per frame] (see ``_tilt``)
 TILT = 10.0
 _LOG_SQRT_2PI = 0.5 * math.log(2.0 * math.pi)
 
@@ -326,6 +328,9 @@ def _along(pa, pb, pc, n, mean, square):
 
 @nb.njit(cache=True)
 def _tilt(rowsum, logb, track, r, other):
+    """The prior's slope across the cell of row r towards row ``other`` (its neighbour): the
+    log-ratio of their predicted masses (posterior over this frame's emission), within
+    +-``TILT``; -``TILT`` when the neighbour holds nothing."""
     v = rowsum[track, other]
     if v <= 0.0:
         return -TILT
@@ -410,7 +415,7 @@ def _subframe_rows(templates, weights, xs, observed, cap, inv_scale2, in_report,
 
 
 @nb.njit(cache=True)
-def _subframe_moments(sub, off, first, last):
+def _subframe_moments(sub, off, first, last, T):
     """Like ``_moments``, each state standing for its cell as ``_subframe_rows`` placed and
     weighted it."""
     mass = 0.0
@@ -428,7 +433,9 @@ def _subframe_moments(sub, off, first, last):
         return 0.0, 0.0, 0.0
     mean /= mass
     var = square / mass - mean * mean
-    return mass, first + mean, var if var > 0.0 else 0.0
+    # rounding must not carry the position past either end of the template
+    at = min(max(first + mean, 0.0), T - 1.0)
+    return mass, at, var if var > 0.0 else 0.0
 
 
 @nb.njit(cache=True)
@@ -776,7 +783,7 @@ def template_step(k, templates, offsets, lengths, half_windows, weights, log_nor
         main[k] = et
     if refined and main[k] == mt:
         # the reported position: each state stands for its cell along the template's segments
-        mass, mean, var = _subframe_moments(sub, off, support[k, mt, 0], support[k, mt, 1])
+        mass, mean, var = _subframe_moments(sub, off, support[k, mt, 0], support[k, mt, 1], T)
         moments[k, mt, 1] = mean
         moments[k, mt, 2] = var
 
@@ -821,6 +828,6 @@ def follow_sequence(X, lower, upper, templates, offsets, lengths, half_windows, 
         for k in range(K):
             scale = 1.0 / (lengths[k] - 1)
             t = main[k]
-            out_progress[n, k] = moments[k, t, 1] * scale
+            out_progress[n, k] = moments[k, t, 1] / (lengths[k] - 1)  # exactly 1 at the end
             out_variance[n, k] = moments[k, t, 2] * scale * scale
             out_loglik[n, k] = loglik[k]

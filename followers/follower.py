@@ -16,6 +16,12 @@ DEFAULT_OUTLIER_SIGMAS = 5.0
 # the default models drop states at the edges of the posterior holding less than this mass
 # (beam pruning): a confident follower then touches a few states, not the whole window
 PRUNE_MASS = 1e-8
+# states per template frame of a lone follower's "speed" model (by name; a bank keeps 1, its
+# per-frame budget). A speed level between two whole advances per frame (0.48x: 0 or 1 state)
+# moves a one-state-per-frame chain by a coin flip each frame, so its position diffuses where a
+# performer's does not: on one channel the 90 % interval held 96-99.5 % of frames at 0.5x and
+# 1.5x. Three states per frame shrink that diffusion ninefold (docs/followers.md, revision 12)
+FOLLOWER_RESOLUTION = 3
 # online emission scale of the default models when sigma is estimated (not given): memory
 # [frames], prior weight of scale 1 [frames], lowest and highest scale of the estimated sigma.
 # The light prior (0.2 frames) lets a follower sharpen within its first frames (the rest pose):
@@ -66,10 +72,14 @@ class FollowerTrace:
     log_likelihood: np.ndarray
 
 
-def resolve_transitions(transitions) -> TransitionModel:
+def resolve_transitions(transitions, *, resolution: int = 1) -> TransitionModel:
+    """A TransitionModel as given, or built by name (``resolution`` states per template frame
+    for ``"speed"``)."""
     if isinstance(transitions, TransitionModel):
         return transitions
     if isinstance(transitions, str):
+        if transitions == "speed":
+            return transition_model("speed", resolution=resolution)
         return transition_model(transitions)
     raise TypeError(f"transitions must be a name ('speed', 'mop', 'skip') or a TransitionModel, "
                     f"got {type(transitions).__name__}")
@@ -98,7 +108,9 @@ class Follower:
         the full forward algorithm. Default: ``followers.defaults.default_window(T)``.
     transitions : ``"speed"`` (default), ``"mop"``, ``"skip"`` or a
         :class:`~followers.transitions.TransitionModel`. ``"mop"`` is the paper to the letter;
-        ``"speed"`` follows performers from 0.5x to 2x the demonstration's speed.
+        ``"speed"`` follows performers from 0.5x to 2x the demonstration's speed, with
+        ``FOLLOWER_RESOLUTION`` (3) states per template frame (a model built with
+        ``transition_model`` keeps its own ``resolution``, 1 by default).
     outlier_sigmas : float, optional: a channel further than this many sigmas from a state counts
         as this far (inf: plain Gaussian). Default: inf for ``"mop"``, 5 otherwise.
     adapt_sigma : bool, optional: learn the emission's scale online (sigma in use = sigma x
@@ -116,8 +128,9 @@ class Follower:
         (``followers._kernels._subframe_rows``), with its own emission scale (learned online
         along the template's direction when sigma is estimated). Progress and variance then
         hold the position inside a cell, not only which cell; the recursion itself is
-        unchanged. Progress stays exactly 0 on the first state and 1 on the last. Default: on, off for ``"mop"`` (the paper's first moment and
-        variance of the state distribution, to the letter).
+        unchanged. Progress stays exactly 0 on the first state and 1 on the last. Default:
+        on, off for ``"mop"`` (the paper's first moment and variance of the state
+        distribution, to the letter).
 
     With ``"mop"`` the window is fixed (equation 7); with the other models, states at the edges
     of the posterior holding less than ``PRUNE_MASS`` are also dropped, so a confident follower
@@ -127,7 +140,7 @@ class Follower:
     def __init__(self, template, *, sigma=None, window=None, transitions="speed",
                  outlier_sigmas=None, adapt_sigma=None, subframe=None):
         tmpl = as_template(template)
-        model = resolve_transitions(transitions)
+        model = resolve_transitions(transitions, resolution=FOLLOWER_RESOLUTION)
         T, D = tmpl.shape
         self._sigma = default_sigma(tmpl) if sigma is None else as_sigma(sigma, (T, D))
         self._window = default_window(T) if window is None else as_window(window, T)

@@ -258,18 +258,18 @@ def test_progress_saturates_and_a_new_repetition_starts_afresh(rng):
 def test_a_repetition_abandoned_halfway_is_picked_up_again(rng):
     """By default a new repetition begins only from the template's end: a performer who stops
     halfway and starts over is followed again once the follower has run out its template (on
-    input that explains none of it, at its speed prior's pace), and with ``restart_anywhere``
-    at once. Out-of-range rates raise."""
+    input that explains none of it, at its speed prior's pace: by the next repetition), and
+    with ``restart_anywhere`` at once. Out-of-range rates raise."""
     template = random_template(rng, 60, 3, scale=2.0)
     half = template[:30]
-    performance = np.vstack([half, template]) + rng.normal(scale=0.05, size=(90, 3))
+    performance = np.vstack([half, template, template]) + rng.normal(scale=0.05, size=(150, 3))
     default = Follower(template).follow(performance).progress
     anywhere = Follower(template, transitions=transition_model(restart_anywhere=1e-3)).follow(
         performance).progress
     truth = np.arange(60) / 59
-    assert np.median(np.abs(default[60:] - truth[30:])) < 0.03  # the second half of the take
-    assert np.median(np.abs(anywhere[40:] - truth[10:])) < 0.03
-    assert np.median(np.abs(default[40:50] - truth[10:20])) > 0.2  # still running out the first
+    assert np.median(np.abs(default[90:] - truth)) < 0.03  # the next repetition
+    assert np.median(np.abs(anywhere[40:90] - truth[10:])) < 0.03
+    assert np.median(np.abs(default[32:40] - truth[2:10])) > 0.2  # still running out the first
     for name in ("restart", "restart_anywhere"):
         with pytest.raises(ValueError, match=f"{name} must be a probability"):
             transition_model(**{name: 1.0})
@@ -315,24 +315,28 @@ def test_position_inside_a_cell_matches_quadrature(n):
 
 def test_progress_between_template_frames(rng):
     """A replay at 0.7x and 1.3x (most frames fall between two template frames), no noise:
-    the position is reported inside a state's cell, to a small fraction of a frame, and the
-    90 % interval still holds the truth. Without it (``subframe=False``, what the state
-    distribution alone says) the error is a fifth of a frame. Progress is exactly 0 on the
-    first frame and settles on exactly 1 while the end is held."""
+    the position is reported inside a state's cell, to a twelfth of a frame, and the
+    90 % interval still holds the truth, with one state per template frame and with the lone
+    follower's default three. With one, what the state distribution alone says
+    (``subframe=False``) is a fifth of a frame off. Progress is exactly 0 on the first frame
+    and settles on 1 while the end is held."""
     template = random_template(rng, 80, 4, scale=2.0)
     for speed in (0.7, 1.3):
         performance, truth = time_warp(template, speed, hold=10)
-        on = Follower(template).follow(performance)
-        off = Follower(template, subframe=False).follow(performance)
         inner = slice(3, len(performance) - 11)
-        error_on = np.abs(on.progress - truth)[inner] * 79
-        error_off = np.abs(off.progress - truth)[inner] * 79
-        assert np.median(error_on) < 0.05, speed
-        assert np.median(error_off) > max(0.1, 3 * np.median(error_on)), speed
-        assert np.mean(error_on <= 1.645 * np.sqrt(on.variance[inner]) * 79) > 0.85
-        assert on.progress[0] == 0.0
-        assert np.all(on.progress[-10:] > 1.0 - 1e-4)
-        assert np.all(on.progress[-5:] == 1.0)
+        error_on = {}
+        for transitions in (transition_model("speed"), "speed"):
+            on = Follower(template, transitions=transitions).follow(performance)
+            error = np.abs(on.progress - truth)[inner] * 79
+            error_on[isinstance(transitions, str)] = np.median(error)
+            assert np.median(error) < 0.08, (speed, transitions)
+            assert np.mean(error <= 1.645 * np.sqrt(on.variance[inner]) * 79) > 0.85
+            assert on.progress[0] == 0.0
+            assert np.all(on.progress[-10:] > 1.0 - 1e-4)
+            assert np.all(on.progress[-5:] > 1.0 - 1e-6)
+        off = Follower(template, transitions=transition_model("speed"), subframe=False)
+        error_off = np.abs(off.follow(performance).progress - truth)[inner] * 79
+        assert np.median(error_off) > max(0.1, 3 * error_on[False]), speed
     with pytest.raises(TypeError, match="subframe must be True, False or None"):
         Follower(template, subframe="yes")
 
@@ -481,7 +485,7 @@ def test_bank_reports_the_shown_actions_position_between_template_frames(rng, ac
         errors[subframe] = np.median(np.abs(result["progress"] - truth)[shown]) * 89
         assert not bank._engine.subframe[[0, 2]].any()
         assert bank._engine.subframe[1] == subframe
-    assert errors[True] < 0.6 * errors[False]
+    assert errors[True] < 0.8 * errors[False]
     with pytest.raises(TypeError, match="subframe must be True, False or None"):
         FollowerBank(actions, subframe=1)
 

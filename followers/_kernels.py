@@ -350,9 +350,9 @@ def _subframe_rows(templates, weights, xs, observed, cap, inv_scale2, in_report,
     sub (4, S) float64 out, for the rows of states holding more than 1e-6 (others 0): the
     mean offset [states], its mean square, the expected squared z-score along the template's
     direction there (``_segment``; -1 where a segment has zero length), and the weight of the
-    cell (its state's
-    mass, the point emission of the recursion swapped for the report's emission integrated
-    over the cell; ``in_report``: the recursion's scale**2 over the report's; summing to 1).
+    cell: its state's mass, the point emission of the recursion swapped for the report's
+    emission integrated over the cell (``in_report``: the recursion's scale**2 over the
+    report's), summing to 1.
     The first and last states keep their position (progress stays 0 at rest and 1 at the end)
     and add only their spread towards their one neighbour."""
     top_weight = -np.inf

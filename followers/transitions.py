@@ -26,8 +26,11 @@ the last state (the current repetition is over) and ``restart_anywhere`` from an
   gestures, a single fast multi-channel frame could then throw the follower back to the start
   mid-gesture: p95 progress error 50-56 % at 0.5x). A repetition abandoned halfway is
   picked up again once the follower has run out its template.
-  ``resolution=R`` optionally upsamples the template to R states per frame (finer positions
-  for slow performers, R times the work; measured no better on GunPoint, so off by default).
+  ``resolution=R`` upsamples the template to R states per frame (R times the work): a speed
+  between two whole advances per frame then moves the chain by a coin flip over 1/R of a frame
+  instead of a whole one. ``transition_model`` defaults to 1 (a bank's per-frame budget); a
+  lone ``Follower`` given ``"speed"`` by name uses 3 (``followers.follower.FOLLOWER_RESOLUTION``:
+  the flips' spread had the progress interval too wide at 0.5x and 1.5x).
 - ``"skip"`` — one speed level with skip transitions of 0–3 states (a memoryless
   alternative, kept for comparison in the benchmark).
 """

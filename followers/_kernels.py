@@ -223,6 +223,7 @@ def _moments(rowsum, track, off, first, last):
 
 
 _SQRT2 = math.sqrt(2.0)
+_SQRT_2PI = math.sqrt(2.0 * math.pi)
 # steepest prior slope across a cell, [nats per frame] (see ``_tilt``)
 TILT = 10.0
 _LOG_SQRT_2PI = 0.5 * math.log(2.0 * math.pi)
@@ -275,8 +276,8 @@ def _half_cell(a, n, h):
         z = 0.5 * (math.erf(hi / _SQRT2) - math.erf(lo / _SQRT2))
     if not z > 0.0:
         return -np.inf, 0.5 * h, h * h / 3.0
-    phi_lo = math.exp(-0.5 * lo * lo) / math.sqrt(2.0 * math.pi)
-    phi_hi = math.exp(-0.5 * hi * hi) / math.sqrt(2.0 * math.pi)
+    phi_lo = math.exp(-0.5 * lo * lo) / _SQRT_2PI
+    phi_hi = math.exp(-0.5 * hi * hi) / _SQRT_2PI
     shift = (phi_lo - phi_hi) / z
     mean = m + s * shift
     var = s * s * (1.0 + (lo * phi_lo - hi * phi_hi) / z - shift * shift)
@@ -812,8 +813,7 @@ def follow_sequence(X, lower, upper, templates, offsets, lengths, half_windows, 
                     advance_tail, advance_range, speed_change, initial_speed, restart, alpha,
                     rowsum, logb, support, moments, main, fresh, loglik, frame_loglik, xs,
                     observed, mix, adapt, scale2, scale_weight, residual, subframe, sub,
-                    out_progress,
-                    out_variance, out_loglik):
+                    out_progress, out_variance, out_loglik):
     """Run ``bank_step`` over the rows of ``X (N, D)``; write each template's main-track
     progress and variance (in [0, 1] units) and cumulative log-likelihood into
     ``out_* (N, K)``."""

@@ -510,8 +510,9 @@ def test_bank_rejects_what_no_template_explains(rng, actions):
     through the same region and now and then run along a stretch of a template. Over 8 of
     them the default bank rejects most frames (measured over session seeds 0-39: at least 0.50
     of the frames after the 20th, median 0.75); one stranger alone is a coin toss of its draw
-    (0.09-1.0), which is why 8 are pooled. The pace term (``pace_weight=2``) rejects more of every draw
-    (0.82-1.0, median 0.93), because a follower that explains a stranger mostly waits in place.
+    (0.09-1.0), which is why 8 are pooled. The pace term (``pace_weight=2``) rejects more of
+    every draw (0.82-1.0, median 0.93), because a follower that explains a stranger mostly
+    waits in place.
     A known action is accepted throughout."""
     bank = FollowerBank(actions)
     paced = FollowerBank(actions, pace_weight=2.0)

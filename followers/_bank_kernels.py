@@ -76,6 +76,31 @@ def outline_step(xs, observed, n_obs, mean, inv_var, log_norm, cap, restart, alp
 
 
 @nb.njit(cache=True)
+def learn_mixture(log_share, posterior, n_obs, decay, lowest, highest, state):
+    """One EM step, with forgetting, on the weight of the recognition mixture's narrow component
+    (an exact repetition of the demonstration) after a frame.
+
+    log_share (K,) float: each follower's log share of this frame's recognition score that the
+        narrow component explains (``frame_loglik[2]``); posterior (K,) float: the posterior
+        over actions after this frame; n_obs: observed channels (0: the frame says nothing,
+        nothing changes)
+    decay : float in (0, 1): forgetting factor per frame; lowest, highest: the weight's range
+    state (2,) float in/out: [weight, forgetful count of the frames behind it]
+    Returns the new weight: the posterior-weighted share, averaged over recent frames with
+    the count as the averaging weight (a reset puts the starting weight and its prior count).
+    """
+    if n_obs == 0:
+        return state[0]
+    share = 0.0
+    for k in range(posterior.shape[0]):
+        share += posterior[k] * math.exp(log_share[k])
+    state[1] = decay * state[1] + 1.0
+    weight = state[0] + (share - state[0]) / state[1]
+    state[0] = min(max(weight, lowest), highest)
+    return state[0]
+
+
+@nb.njit(cache=True)
 def bank_decide(frame_loglik, outline_ll, outline_weight, xs, observed, n_obs, background_mean,
                 background_weight, background_log_norm, cap, decay, fit_decay, evidence_cap,
                 lead_cap, fit_floor, recent, fit, likelihood_fit, fit_weight, pace,
@@ -84,8 +109,9 @@ def bank_decide(frame_loglik, outline_ll, outline_weight, xs, observed, n_obs, b
                 switch_margin, state, moments, main, lengths, progress, variance):
     """Update the bank's decision after one frame.
 
-    frame_loglik (2, K) float: each follower's log-likelihood of this frame under its own
-        emission model (row 0) and its recognition model (row 1, what the bank uses)
+    frame_loglik (3, K) float: each follower's log-likelihood of this frame under its own
+        emission model (row 0) and its recognition model (row 1, what the bank uses; row 2 is
+        read by ``learn_mixture``)
     outline_ll (K,) float, outline_weight : float >= 0: each action's outline-model frame
         log-likelihood (``outline_step``) and its weight in the posterior's evidence (not in
         ``fit``: the rejection compares the followers alone with the background)

@@ -40,7 +40,9 @@ class ForwardEngine:
     recognition_mixture : (weight, scale), optional, with recognition_sigmas: the recognition
         model becomes a mixture per state, ``weight`` in (0, 1) on a Gaussian of the follower's
         sigma times ``scale`` (not the learned scale; a float, or (K, D): per template and
-        channel, each > 0) and ``1 - weight`` on the recognition_sigmas' one
+        channel, each > 0) and ``1 - weight`` on the recognition_sigmas' one. The weight is
+        ``self.mixture``, which may change between frames (a bank learns it from
+        ``frame_loglik[2]``, the narrow component's log share of each frame's score)
     prune : float: edge states of a track's support below this mass are dropped (0 = never)
     scale_adaptation : (memory [frames], prior [frames], lowest, highest scale) or None: learn
         each follower's emission scale online (sigma x scale, EM on one scalar per template,
@@ -135,7 +137,7 @@ class ForwardEngine:
         self.main = np.zeros(K, dtype=np.int64)
         self.fresh = np.ones(K, dtype=np.bool_)
         self.loglik = np.zeros(K)
-        self.frame_loglik = np.zeros((2, K))
+        self.frame_loglik = np.zeros((3, K))
         self._xs = np.zeros(self.channels)
         self._observed = np.zeros(self.channels)
         self._mix = np.zeros(M)

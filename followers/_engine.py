@@ -5,6 +5,8 @@ the engine owns the preallocated arrays and calls the kernels in ``_kernels``.
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from followers import _kernels
@@ -13,6 +15,14 @@ from followers.transitions import TransitionModel
 # a clamped value stays this many (template range + sigma) away from the template's range, which
 # keeps every squared distance finite in float64 while still being "far away"
 _CLAMP_SPAN = 1e3
+
+
+def _stacked(arrays: list[np.ndarray], owned: bool) -> np.ndarray:
+    """The (T_k, D) arrays one above the other in a new C-contiguous float64 array, or, when
+    there is one and it is ``owned`` (made here, not the caller's), that array itself."""
+    if owned and len(arrays) == 1:
+        return np.ascontiguousarray(arrays[0], dtype=np.float64)
+    return np.ascontiguousarray(np.concatenate(arrays, axis=0), dtype=np.float64)
 
 
 def _upsample(values: np.ndarray, factor: int) -> np.ndarray:
@@ -72,12 +82,14 @@ class ForwardEngine:
         self.lengths = np.array([t.shape[0] for t in templates], dtype=np.int64)
         self.offsets = np.zeros(len(templates), dtype=np.int64)
         self.offsets[1:] = np.cumsum(self.lengths)[:-1]
-        self.templates = np.ascontiguousarray(np.concatenate(templates, axis=0))
-        self.sigmas = np.ascontiguousarray(np.concatenate(sigmas, axis=0), dtype=np.float64)
+        # one template is taken as it is (R > 1: the upsampled copy); set-up time is mostly
+        # the first touch of fresh memory (page faults), so no array is copied that need not be
+        self.templates = _stacked(templates, owned=R > 1)
+        self.sigmas = _stacked(sigmas, owned=R > 1)
         # emission models: 0 drives the forward recursion, 1 (and 2, the narrow component of a
         # recognition mixture) only score frames for recognition
         self.dual = recognition_sigmas is not None
-        rec = (np.concatenate(recognition_sigmas, axis=0) if self.dual else self.sigmas)
+        rec = _stacked(recognition_sigmas, owned=R > 1) if self.dual else self.sigmas
         self.mixture = 0.0
         # the narrow component's scale per template and channel: its inverse square and log
         self.exact_scales = np.ones((len(templates), self.channels))
@@ -99,10 +111,18 @@ class ForwardEngine:
                                  f"{self.exact_scales.min()} to {self.exact_scales.max()}")
         self.exact_inv2 = np.ascontiguousarray(1.0 / self.exact_scales ** 2)
         self.exact_log = np.ascontiguousarray(np.log(self.exact_scales))
-        both = np.stack([self.sigmas, np.asarray(rec, dtype=np.float64)])
-        self.weights = np.ascontiguousarray(1.0 / both ** 2)
-        self.state_log_norm = np.ascontiguousarray(-0.5 * np.log(2.0 * np.pi * both ** 2))
-        self.state_log_norm_sum = np.ascontiguousarray(self.state_log_norm.sum(axis=2))
+        # weights = 1 / sigma^2 and log_norm = -0.5 log(2 pi sigma^2) = 0.5 log(weights / 2 pi),
+        # in place (each temporary of this size would be fresh memory to fault in); row 1, the
+        # recognition model's, only when there is one
+        models = (self.sigmas, rec) if self.dual else (self.sigmas,)
+        self.weights = np.empty((len(models),) + self.sigmas.shape)
+        for row, sigma in enumerate(models):
+            np.square(sigma, out=self.weights[row])
+        np.reciprocal(self.weights, out=self.weights)
+        self.state_log_norm = np.log(self.weights)
+        self.state_log_norm -= math.log(2.0 * math.pi)
+        self.state_log_norm *= 0.5
+        self.state_log_norm_sum = self.state_log_norm.sum(axis=2)
         self.half_windows = np.ascontiguousarray(windows, dtype=np.int64)
         self.transitions = transitions
         self.cap = float(cap)

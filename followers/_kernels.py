@@ -29,8 +29,8 @@ The emission of state ``j`` is ``sum over observed channels d`` of
 ``-0.5 * min(w[e, j, d] * (x[d] - template[j, d])**2, cap) - 0.5 * log(2 pi sigma[e, j, d]**2)``
 with ``w = 1 / sigma**2``, sigma per model ``e`` (0: the follower's, 1: recognition, 2: the
 recognition mixture's narrow component: model 0's sigma, unscaled, times the template's
-exact scale per channel), state and channel: ``weights, log_norm (2, S, D)`` (model 2 needs
-only its (K, D) scales).
+exact scale per channel), state and channel: ``weights, log_norm (E, S, D)``, E = 2 with a
+recognition model (``dual``), else 1 (model 2 needs only its (K, D) scales).
 ``cap = inf`` is the plain Gaussian of the paper (equation 1); a finite cap bounds what one wild
 channel can do. Each frame is scaled by the largest emission, so nothing under- or overflows
 however long the run.
@@ -105,15 +105,19 @@ def _emission_rows(templates, weights, log_norm, log_norm_sum, first, last, xs, 
                 diff = xs[d] - templates[j, d]
                 v = weights[0, j, d] * observed[d] * diff * diff * inv_scale2
                 acc += v if v < cap else cap
+        # (row 1 of weights and log_norm exists only when dual)
+        norm_rec = 0.0
         if all_observed:
             norm = log_norm_sum[0, j]
-            norm_rec = log_norm_sum[1, j]
+            if dual:
+                norm_rec = log_norm_sum[1, j]
         else:
             norm = 0.0
-            norm_rec = 0.0
             for d in range(D):
                 norm += log_norm[0, j, d] * observed[d]
-                norm_rec += log_norm[1, j, d] * observed[d]
+            if dual:
+                for d in range(D):
+                    norm_rec += log_norm[1, j, d] * observed[d]
         residual[j] = acc
         out[0, j] = norm + norm_shift - 0.5 * acc
         if dual:
@@ -490,8 +494,9 @@ def template_step(k, templates, offsets, lengths, half_windows, weights, log_nor
                   alpha, rowsum, logb, support, moments, main, fresh, loglik, frame_loglik, mix,
                   adapt, scale2, scale_weight, residual, subframe, sub):
     """One frame of the windowed forward algorithm for template ``k`` (see the module docstring
-    for the layout). ``weights (2, S, D)``: 1 / sigma**2 per model and state; ``log_norm
-    (2, S, D)``: -0.5 log(2 pi sigma**2), ``log_norm_sum (2, S)`` its sum over channels;
+    for the layout). ``weights (E, S, D)``: 1 / sigma**2 per model and state (E = 2 when
+    ``dual``, else 1); ``log_norm (E, S, D)``: -0.5 log(2 pi sigma**2), ``log_norm_sum (E, S)``
+    its sum over channels;
     ``dual``: score frames with model 1 too; ``mixture`` in [0, 1): with dual, the weight of
     model 2 (model 0's sigma times ``exp(exact_log[k])`` per channel; ``exact_inv2 (K, D)``
     the inverse square of that scale) in the recognition score (0: model 1 alone);

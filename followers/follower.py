@@ -20,8 +20,13 @@ PRUNE_MASS = 1e-8
 # per-frame budget). A speed level between two whole advances per frame (0.48x: 0 or 1 state)
 # moves a one-state-per-frame chain by a coin flip each frame, so its position diffuses where a
 # performer's does not: on one channel the 90 % interval held 96-99.5 % of frames at 0.5x and
-# 1.5x. Three states per frame shrink that diffusion ninefold (docs/followers.md, revision 12)
-FOLLOWER_RESOLUTION = 3
+# 1.5x. Three states per frame shrink that diffusion ninefold (docs/followers.md, revision 12);
+# four sixteenfold, with the tempo allowed to wander a little more (FOLLOWER_SPEED_JITTER per
+# frame to each neighbouring speed level, the bank's 0.01 otherwise), which keeps the interval
+# from turning narrow at 2x: revision 15, the interval inside 85-95 % on every set and speed of
+# the benchmark (it held 97 % of Wiimote frames at 0.5x with 3 states and 0.01)
+FOLLOWER_RESOLUTION = 4
+FOLLOWER_SPEED_JITTER = 0.015
 # online emission scale of the default models when sigma is estimated (not given): memory
 # [frames], prior weight of scale 1 [frames], lowest and highest scale of the estimated sigma.
 # The light prior (0.2 frames) lets a follower sharpen within its first frames (the rest pose):
@@ -72,17 +77,27 @@ class FollowerTrace:
     log_likelihood: np.ndarray
 
 
-def resolve_transitions(transitions, *, resolution: int = 1) -> TransitionModel:
-    """A TransitionModel as given, or built by name (``resolution`` states per template frame
-    for ``"speed"``)."""
+def resolve_transitions(transitions, *, resolution: int = 1,
+                        speed_jitter: float | None = None) -> TransitionModel:
+    """A TransitionModel as given, or built by name (for ``"speed"``: ``resolution`` states per
+    template frame, and ``speed_jitter`` if given, ``transition_model``'s default otherwise)."""
     if isinstance(transitions, TransitionModel):
         return transitions
     if isinstance(transitions, str):
         if transitions == "speed":
-            return transition_model("speed", resolution=resolution)
+            if speed_jitter is None:
+                return transition_model("speed", resolution=resolution)
+            return transition_model("speed", resolution=resolution, speed_jitter=speed_jitter)
         return transition_model(transitions)
     raise TypeError(f"transitions must be a name ('speed', 'mop', 'skip') or a TransitionModel, "
                     f"got {type(transitions).__name__}")
+
+
+def _own(array: np.ndarray, given) -> np.ndarray:
+    """``array`` (validated from ``given``), copied if it shares memory with ``given``."""
+    if isinstance(given, np.ndarray) and np.may_share_memory(array, given):
+        return array.copy()
+    return array
 
 
 def resolve_cap(outlier_sigmas, kind: str) -> float:
@@ -109,8 +124,9 @@ class Follower:
     transitions : ``"speed"`` (default), ``"mop"``, ``"skip"`` or a
         :class:`~followers.transitions.TransitionModel`. ``"mop"`` is the paper to the letter;
         ``"speed"`` follows performers from 0.5x to 2x the demonstration's speed, with
-        ``FOLLOWER_RESOLUTION`` (3) states per template frame (a model built with
-        ``transition_model`` keeps its own ``resolution``, 1 by default).
+        ``FOLLOWER_RESOLUTION`` (4) states per template frame and a speed jitter of
+        ``FOLLOWER_SPEED_JITTER`` (0.015) (a model built with ``transition_model`` keeps its
+        own ``resolution`` and jitter, 1 and 0.01 by default).
     outlier_sigmas : float, optional: a channel further than this many sigmas from a state counts
         as this far (inf: plain Gaussian). Default: inf for ``"mop"``, 5 otherwise.
     adapt_sigma : bool, optional: learn the emission's scale online (sigma in use = sigma x
@@ -139,10 +155,14 @@ class Follower:
 
     def __init__(self, template, *, sigma=None, window=None, transitions="speed",
                  outlier_sigmas=None, adapt_sigma=None, subframe=None):
-        tmpl = as_template(template)
-        model = resolve_transitions(transitions, resolution=FOLLOWER_RESOLUTION)
+        # our own copies where validation handed back the caller's arrays: the template is
+        # made read-only below, and neither may change under the follower
+        tmpl = _own(as_template(template), template)
+        model = resolve_transitions(transitions, resolution=FOLLOWER_RESOLUTION,
+                                    speed_jitter=FOLLOWER_SPEED_JITTER)
         T, D = tmpl.shape
-        self._sigma = default_sigma(tmpl) if sigma is None else as_sigma(sigma, (T, D))
+        self._sigma = (default_sigma(tmpl) if sigma is None
+                       else _own(as_sigma(sigma, (T, D)), sigma))
         self._window = default_window(T) if window is None else as_window(window, T)
         self._transitions = model
         self._engine = ForwardEngine(

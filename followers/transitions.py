@@ -29,8 +29,9 @@ the last state (the current repetition is over) and ``restart_anywhere`` from an
   ``resolution=R`` upsamples the template to R states per frame (R times the work): a speed
   between two whole advances per frame then moves the chain by a coin flip over 1/R of a frame
   instead of a whole one. ``transition_model`` defaults to 1 (a bank's per-frame budget); a
-  lone ``Follower`` given ``"speed"`` by name uses 3 (``followers.follower.FOLLOWER_RESOLUTION``:
-  the flips' spread had the progress interval too wide at 0.5x and 1.5x).
+  lone ``Follower`` given ``"speed"`` by name uses 4 (``followers.follower.FOLLOWER_RESOLUTION``:
+  the flips' spread had the progress interval too wide at 0.5x and 1.5x), with a speed jitter of
+  0.015 (``FOLLOWER_SPEED_JITTER``).
 - ``"skip"`` — one speed level with skip transitions of 0–3 states (a memoryless
   alternative, kept for comparison in the benchmark).
 """

@@ -182,6 +182,32 @@ def test_step_equals_follow_and_reset_starts_over(rng):
 
 # ---- numerics on hostile input -----------------------------------------------------------------
 
+def test_followers_keep_their_own_copy_of_the_template(rng):
+    """The engine takes a lone template without copying it when it made the array itself
+    (upsampled), and copies what the caller handed in: changing the caller's template and
+    sigma afterwards changes nothing, in every transition model and in a bank of one, and the
+    caller's arrays stay writable (a Follower used to mark the caller's template read-only)."""
+    template = random_template(rng, 40, 3)
+    sigma = np.full((40, 3), 0.5)
+    X = time_warp(template, 1.3)[0] + rng.normal(scale=0.1, size=(1, 3))
+    makers = [lambda kind=kind: Follower(template, sigma=sigma, transitions=kind)
+              for kind in ("speed", "mop", "skip")]
+    makers.append(lambda: FollowerBank({"only": template}, sigma=sigma))
+    for make in makers:
+        follower = make()
+        before = follower.follow(X)
+        template[:] += 1.0
+        sigma[:] *= 3.0
+        after = follower.follow(X)
+        template[:] -= 1.0
+        sigma[:] /= 3.0
+        if isinstance(before, dict):
+            np.testing.assert_array_equal(before["progress"], after["progress"])
+        else:
+            np.testing.assert_array_equal(before.progress, after.progress)
+            np.testing.assert_array_equal(before.log_likelihood, after.log_likelihood)
+
+
 def test_missing_channel_equals_follower_without_it(rng):
     template = random_template(rng, 40, 3)
     X, _ = time_warp(template, 0.8)

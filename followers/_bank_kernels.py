@@ -101,7 +101,8 @@ def learn_mixture(log_share, posterior, n_obs, decay, lowest, highest, state):
 
 
 @nb.njit(cache=True)
-def bank_decide(frame_loglik, outline_ll, outline_weight, xs, observed, n_obs, background_mean,
+def bank_decide(frame_loglik, outline_ll, outline_weight, outline_fit_margin, xs, observed,
+                n_obs, background_mean,
                 background_weight, background_log_norm, cap, decay, fit_decay, evidence_cap,
                 lead_cap, fit_floor, recent, fit, likelihood_fit, fit_weight, pace,
                 last_position, last_main, since_end, end_fraction, pace_floor, pace_decay,
@@ -113,8 +114,10 @@ def bank_decide(frame_loglik, outline_ll, outline_weight, xs, observed, n_obs, b
         emission model (row 0) and its recognition model (row 1, what the bank uses; row 2 is
         read by ``learn_mixture``)
     outline_ll (K,) float, outline_weight : float >= 0: each action's outline-model frame
-        log-likelihood (``outline_step``) and its weight in the posterior's evidence (not in
-        ``fit``: the rejection compares the followers alone with the background)
+        log-likelihood (``outline_step``) and its weight in the posterior's evidence
+    outline_fit_margin : float >= 0 [nats per channel] or inf: in ``fit`` a frame counts as
+        the better of its follower's score and its outline model's less this margin per
+        observed channel (inf: the follower's alone)
     xs (D,) float: the cleaned frame; observed (D,) float: 1 or 0 (see ``_kernels.prepare_frame``)
     n_obs : int: observed channels this frame (0: the frame says nothing, nothing changes)
     background_mean, background_weight, background_log_norm (D,) float: the background model, one
@@ -213,7 +216,12 @@ def bank_decide(frame_loglik, outline_ll, outline_weight, xs, observed, n_obs, b
             recent[k] = decay * recent[k] + evidence
             if recent[k] > leader:
                 leader = recent[k]
-            per_channel = (value - background) / n_obs
+            # the outline model, less a margin: an irregular repetition of the action (a take
+            # of another session) that its follower loses track of is still the action
+            explained = outline_ll[k] - outline_fit_margin * n_obs
+            if value > explained:
+                explained = value
+            per_channel = (explained - background) / n_obs
             if per_channel < fit_floor:
                 per_channel = fit_floor
             likelihood_fit[k] = likelihood_fit[k] + (per_channel - likelihood_fit[k]) * inv_w

@@ -505,7 +505,7 @@ class FollowerBank:
         self._background_log_norm = -0.5 * np.log(2.0 * np.pi * spread ** 2)
         # the outline models, stacked (K, S, D)
         self.outline_weight = outline_weight
-        # inf would make the kernel's comparison inf * 0 on a frame with no channel
+        # a finite stand-in for inf (the kernel subtracts it times the channel count)
         self._outline_fit_margin = min(outline_fit_margin, 1e300)
         S = min(OUTLINE_STATES, min(a.shape[0] for a in arrays))
         outlines = [outline_model(a, S, spread) for a in arrays]

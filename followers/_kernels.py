@@ -47,6 +47,11 @@ import math
 import numba as nb
 import numpy as np
 
+# The per-frame kernels may reassociate and fuse multiply-adds ({"reassoc", "contract"}: about
+# 8 % off a K = 32 bank step, 0.186 against 0.202 ms in alternating runs, every benchmark figure
+# unchanged), but not assume away NaN or inf: -inf marks "no state yet" and an overflow check
+# compares against inf.
+
 @nb.njit(cache=True)
 def prepare_frame(x, lower, upper, xs, observed):
     """Clean one input frame: NaN -> missing, +-inf and huge values clamped into [lower, upper].
@@ -127,7 +132,7 @@ def _emission_rows(templates, weights, log_norm, log_norm_sum, first, last, xs, 
             out[1, j] = out[0, j]
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, fastmath={"reassoc", "contract"})
 def _clear_rows(alpha, rowsum, track, first, last):
     M = alpha.shape[2]
     for j in range(first, last + 1):
@@ -136,7 +141,7 @@ def _clear_rows(alpha, rowsum, track, first, last):
             alpha[track, j, m] = 0.0
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, fastmath={"reassoc", "contract"})
 def _predict_track(alpha, rowsum, track, off, T, lo, hi, keep_scale, advance, advance_tail,
                    advance_range, speed_change, mix):
     """Transition one track in place: truncate to [lo, hi] (state indices within the template),
@@ -209,7 +214,7 @@ def _window(center, half, T):
     return lo, hi
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, fastmath={"reassoc", "contract"})
 def _moments(rowsum, track, off, first, last):
     mass = 0.0
     mean = 0.0
@@ -455,7 +460,7 @@ def _argmax_row(rowsum, track, off, first, last):
     return best
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, fastmath={"reassoc", "contract"})
 def _predictive_loglik(rowsum, logb, model, support, k, off):
     """log sum_j predicted_j * b_j(x) over both tracks, for emission model ``model``, scaled so
     that it neither under- nor overflows."""
@@ -487,7 +492,7 @@ def _predictive_loglik(rowsum, logb, model, support, k, off):
     return math.log(c) + best if c > 0.0 else -1e300
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, fastmath={"reassoc", "contract"})
 def template_step(k, templates, offsets, lengths, half_windows, weights, log_norm, log_norm_sum,
                   xs, observed, n_obs, cap, dual, mixture, exact_inv2, exact_log, prune,
                   advance, advance_tail, advance_range, speed_change, initial_speed, restart,

@@ -18,6 +18,7 @@ import argparse
 import logging
 import math
 import os
+import subprocess
 import sys
 import time
 import warnings
@@ -137,7 +138,6 @@ def timing(args):
         f"p90 {1e3 * np.percentile(times, 90):.2f} ms")
     # the same in a fresh process: set-up is mostly the first touch of new memory (page
     # faults), which a process that has already freed large arrays (this one) partly skips
-    import subprocess
     code = ("import time, numpy as np; from followers import Follower; "
             "t = np.cumsum(np.random.default_rng(1).normal(size=(300, 60)), axis=0); "
             "Follower(t); ts = []\n"

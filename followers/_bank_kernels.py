@@ -104,7 +104,7 @@ def learn_mixture(log_share, posterior, n_obs, decay, lowest, highest, state):
 def bank_decide(frame_loglik, outline_ll, outline_weight, outline_fit_margin, xs, observed,
                 n_obs, background_mean,
                 background_weight, background_log_norm, cap, decay, fit_decay, evidence_cap,
-                lead_cap, fit_floor, recent, fit, likelihood_fit, fit_weight, pace,
+                lead_cap, lead_cap_at_end, fit_floor, recent, fit, likelihood_fit, fit_weight, pace,
                 last_position, last_main, since_end, end_fraction, pace_floor, pace_decay,
                 pace_reference, pace_weight, posterior, thresholds, enter_margin, leave_margin,
                 switch_margin, state, moments, main, lengths, progress, variance):
@@ -126,11 +126,13 @@ def bank_decide(frame_loglik, outline_ll, outline_weight, outline_fit_margin, xs
     decay : float in (0, 1]: forgetting factor of ``recent`` per frame (exp(-1 / memory);
         1 = no forgetting, the lead cap alone lets a new action take over)
     fit_decay : float in (0, 1): forgetting factor of ``fit`` per frame
-    evidence_cap, lead_cap : float > 0 [nats]: one frame can count at most ``evidence_cap``
-        against a follower (relative to the frame's best), and no follower trails the leader by
-        more than ``lead_cap`` in ``recent``. An action that was wrong for a long time thus
-        owes little, and a switch is followed as soon as the new action has been clearly better
-        for a few frames, while one odd frame cannot flip the decision.
+    evidence_cap, lead_cap, lead_cap_at_end : float > 0 [nats]: one frame can count at most
+        ``evidence_cap`` against a follower (relative to the frame's best), and no follower
+        trails the leader by more than ``lead_cap`` in ``recent``, or ``lead_cap_at_end`` while
+        the leader's follower is at the end of its template (``progress >= end_fraction``: its
+        action performed, the next one may begin). An action that was wrong for a long time
+        thus owes little, and a switch is followed as soon as the new action has been clearly
+        better for a few frames, while one odd frame cannot flip the decision.
     fit_floor : float [nats per channel]: one frame counts at most this low in ``fit``, for
         the same reason (an action that was badly rejected recovers within a few frames)
     recent (K,) float in/out: forgetful sum of frame log-likelihoods relative to each frame's
@@ -208,6 +210,7 @@ def bank_decide(frame_loglik, outline_ll, outline_weight, outline_fit_margin, xs
             if score > frame_best:
                 frame_best = score
         leader = -np.inf
+        leading = 0
         for k in range(K):
             value = frame_loglik[1, k]
             evidence = value + outline_weight * outline_ll[k] - frame_best
@@ -216,6 +219,7 @@ def bank_decide(frame_loglik, outline_ll, outline_weight, outline_fit_margin, xs
             recent[k] = decay * recent[k] + evidence
             if recent[k] > leader:
                 leader = recent[k]
+                leading = k
             # the outline model, less a margin: an irregular repetition of the action (a take
             # of another session) that its follower loses track of is still the action
             explained = outline_ll[k] - outline_fit_margin * n_obs
@@ -231,10 +235,14 @@ def bank_decide(frame_loglik, outline_ll, outline_weight, outline_fit_margin, xs
             penalty = pace_weight * math.log(pace[k] / pace_reference) if pace_weight > 0.0 \
                 else 0.0
             fit[k] = likelihood_fit[k] + (penalty if penalty < 0.0 else 0.0)
-        # relative to the leader: without forgetting (decay 1) the sums would drift without bound
+        # relative to the leader: without forgetting (decay 1) the sums would drift without bound.
+        # In the middle of the leader's action the others may trail further: a performer
+        # rarely abandons a gesture halfway, and another performer's take is decided by all
+        # of its middle
+        limit = lead_cap_at_end if progress[leading] >= end_fraction else lead_cap
         for k in range(K):
-            if recent[k] < leader - lead_cap:
-                recent[k] = leader - lead_cap
+            if recent[k] < leader - limit:
+                recent[k] = leader - limit
             recent[k] -= leader
         state[2] += 1
     best = 0

@@ -843,3 +843,27 @@ def follow_sequence(X, lower, upper, templates, offsets, lengths, half_windows, 
             out_progress[n, k] = moments[k, t, 1] / span  # a division: exactly 1 at the end
             out_variance[n, k] = moments[k, t, 2] / (span * span)
             out_loglik[n, k] = loglik[k]
+
+
+@nb.njit(cache=True)
+def tempo_calibrate(progress, variance, span, gain, lowest, highest, exponent, state):
+    """Scale a lone follower's variance by its performer's tempo, in place, frame by frame.
+
+    progress, variance (N,) float: the follower's outputs, in [0, 1] units; span = T - 1
+    [template frames]. The tempo is a forgetful mean (gain = 1 / memory [frames]) of the
+    forward advance per frame [template frames per frame; a step back, a new repetition,
+    counts as 0], kept within [lowest, highest]; variance := variance * tempo ** exponent.
+    state (2,) float in/out: the last progress and the tempo (reset: 0 and 1)."""
+    keep = 1.0 - gain
+    for n in range(progress.shape[0]):
+        advance = (progress[n] - state[0]) * span
+        if advance < 0.0:
+            advance = 0.0
+        state[0] = progress[n]
+        state[1] = keep * state[1] + gain * advance
+        tempo = state[1]
+        if tempo < lowest:
+            tempo = lowest
+        elif tempo > highest:
+            tempo = highest
+        variance[n] *= tempo ** exponent

@@ -36,8 +36,8 @@ FOLLOWER_SPEED_JITTER = 0.015
 # BasicMotions 92.7 / 89.5 % at 0.5x / 2x; Wiimote's 0.5x 95.1-95.3 % in other draws, above the
 # 85-95 % target). Exponents 0 / 0.2 / 0.3 / 0.4 over three draws of every set and speed
 # (seeds 7-9 of the benchmark's protocol): coverage 86.0-95.3 / 87.7-93.6 / 88.9-93.9 /
-# 88.1-94.2 %; 0.2 centres it most (docs/followers.md, revision 19). The same scale from the
-# true speed instead of the estimate gives the same figures within 1 point.
+# 88.1-94.2 %; 0.2 centres it most (docs/followers.md, revision 19). The true speed in place
+# of the estimate (exponent 0.3) gives figures within 2 points of the estimate's.
 TEMPO_EXPONENT = 0.2
 TEMPO_MEMORY = 10.0
 # online emission scale of the default models when sigma is estimated (not given): memory
@@ -179,6 +179,10 @@ class Follower:
         # our own copies where validation handed back the caller's arrays: the template is
         # made read-only below, and neither may change under the follower
         tmpl = _own(as_template(template), template)
+        if tempo_variance is None:
+            tempo_variance = isinstance(transitions, str) and transitions == "speed"
+        if not isinstance(tempo_variance, (bool, np.bool_)):
+            raise TypeError(f"tempo_variance must be True, False or None, got {tempo_variance!r}")
         model = resolve_transitions(transitions, resolution=FOLLOWER_RESOLUTION,
                                     speed_jitter=FOLLOWER_SPEED_JITTER)
         T, D = tmpl.shape
@@ -195,10 +199,6 @@ class Follower:
             report_adaptation=None if sigma is not None else SCALE_ADAPTATION)
         self._template = tmpl
         self._template.setflags(write=False)
-        if tempo_variance is None:
-            tempo_variance = isinstance(transitions, str) and transitions == "speed"
-        if not isinstance(tempo_variance, (bool, np.bool_)):
-            raise TypeError(f"tempo_variance must be True, False or None, got {tempo_variance!r}")
         # (span, gain, lowest, highest, exponent) of _kernels.tempo_calibrate, or None
         self._tempo = ((T - 1.0, 1.0 / TEMPO_MEMORY, float(model.speeds.min()),
                         float(model.speeds.max()), TEMPO_EXPONENT) if tempo_variance else None)

@@ -731,9 +731,9 @@ def test_bank_outline_model_matches_hmmlearn_and_feeds_the_evidence(rng, actions
     # the weight: 0 leaves the fit alone and changes the evidence (with the recognition
     # mixture's weight fixed: a learned one follows the posterior, and with it the fit)
     # (the posterior picks the shown action, whose follower has its own restart rate,
-    # active_restart: the same rate for all here, or the fit would follow the posterior too;
-    # to 1e-9: the shown action's restart is still applied on its own, which moved the fit by
-    # up to 1e-10 relative on some seeds, e.g. MOP_TEST_SEED=10)
+    # active_restart: here the same rate as the others', or the fit would follow the posterior
+    # too; to 1e-9: the fits still differed by up to 1e-10 relative on some seeds, e.g.
+    # MOP_TEST_SEED=10)
     fixed = FollowerBank(templates, outlier_sigmas=1e6, mixture_memory=None,
                          active_restart=1e-3).follow(X)
     plain = FollowerBank(templates, outlier_sigmas=1e6, outline_weight=0.0,

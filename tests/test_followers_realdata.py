@@ -77,7 +77,7 @@ def test_interval_holds_the_true_position_on_multichannel_takes(rng, basic_motio
     assert np.median(np.concatenate(errors)) < 0.002  # a fifth of a frame is 0.002
 
 
-def test_interval_is_as_wide_at_half_speed_as_at_double_speed(rng):
+def test_interval_holds_the_truth_at_half_and_double_speed(rng):
     """GunPoint's training gestures (nothing in the follower was chosen on them) at 0.5x and
     2x: the 90 % interval holds the truth in 85-95 % of frames at both speeds, narrowed at 0.5x
     and widened at 2x by the tempo in the variance. Without it (``tempo_variance=False``) a

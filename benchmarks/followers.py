@@ -518,11 +518,13 @@ def wiimote(args):
     directions = (("templates from the train split, the test split as input", X, y, Xt, yt, 5),
                   ("templates from the test split, the train split as input", Xt, yt, X, y, 6))
     for name, Xd, yd, Xi, yi, seed in directions:
+        # the first direction's draws also serve the replays and the rejection below
+        first = Xd is X
         rng = np.random.default_rng(seed)
         scores = {label: [] for label in labels}  # per draw: (gestures, 3) bool
         for draw in range(rounds):
             pick = [int(rng.choice(np.nonzero(yd == c)[0])) for c in classes]
-            if Xd is X:
+            if first:
                 draws.append(pick)
             normed, normaliser = normalise([Xd[i] for i in pick])
             bank = FollowerBank(dict(zip(classes, normed)))
@@ -540,7 +542,7 @@ def wiimote(args):
                 rows[labels[3]].append(xmm_right(models, performance, label, marks))
             for label in labels:
                 scores[label].append(np.array(rows[label]))
-            if Xd is not X or draw >= 5:
+            if not first or draw >= 5:
                 continue
             for label, template in zip(classes, normed):
                 for _ in range(replays):

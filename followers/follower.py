@@ -99,9 +99,8 @@ def resolve_transitions(transitions, *, resolution: int = 1,
         return transitions
     if isinstance(transitions, str):
         if transitions == "speed":
-            if speed_jitter is None:
-                return transition_model("speed", resolution=resolution)
-            return transition_model("speed", resolution=resolution, speed_jitter=speed_jitter)
+            jitter = {} if speed_jitter is None else {"speed_jitter": speed_jitter}
+            return transition_model("speed", resolution=resolution, **jitter)
         return transition_model(transitions)
     raise TypeError(f"transitions must be a name ('speed', 'mop', 'skip') or a TransitionModel, "
                     f"got {type(transitions).__name__}")

@@ -365,6 +365,16 @@ def rejection_score(bank, performance) -> float:
     return float((trace["fits"] - bank.thresholds).max(axis=1)[10:].mean())
 
 
+def say_auroc_means(across, replayed) -> None:
+    """The two rejection protocols' mean AUROC, each against the issue's 0.9."""
+    def verdict(value):
+        return "met" if value >= 0.9 else "NOT met"
+    say(f"  mean AUROC, known performed as recorded (the issue's protocol, real takes "
+        f"time-warped): {np.mean(replayed):.3f} (target >= 0.9: {verdict(np.mean(replayed))})")
+    say(f"  mean AUROC, another take of the known actions (across performers): "
+        f"{np.mean(across):.3f} (>= 0.9: {verdict(np.mean(across))})")
+
+
 def replay_auroc(bank, templates, unrecorded, rng, repeats=5,
                  speeds=(0.5, 1.0, 1.5, 2.0)) -> float:
     """Rejection AUROC when the known actions are performed as recorded: `repeats` replays of
@@ -457,9 +467,7 @@ def recognition(args):
         replayed.append(np.mean(per_replay))
         say(f"  {held:<10} unrecorded: AUROC {np.mean(per):.3f} (known performed as recorded: "
             f"{np.mean(per_replay):.3f})")
-    say(f"  mean AUROC {np.mean(aucs):.3f} (target >= 0.9: "
-        f"{'met' if np.mean(aucs) >= 0.9 else 'NOT met'}); known performed as recorded: "
-        f"{np.mean(replayed):.3f}")
+    say_auroc_means(aucs, replayed)
 
     say("\n== XMM-style per-frame cost (for scale): 32 classes x 10 states x 60 channels, "
         "NumPy streaming forward ==")
@@ -589,9 +597,7 @@ def wiimote(args):
         replay_aucs.append(np.mean(per_replay))
         say(f"  gesture {held:>2} unrecorded: AUROC {np.mean(per):.3f} (known performed as "
             f"recorded: {np.mean(per_replay):.3f})")
-    say(f"  mean AUROC {np.mean(aucs):.3f} (target >= 0.9: "
-        f"{'met' if np.mean(aucs) >= 0.9 else 'NOT met'}); known performed as recorded: "
-        f"{np.mean(replay_aucs):.3f}")
+    say_auroc_means(aucs, replay_aucs)
 
 
 def pictures(args):

@@ -198,7 +198,7 @@ def rendering(puppet: LatexPuppet, frames: int) -> None:
         times = []
         with Scene3D(size=(720, 576), background="chroma", antialias=antialias) as scene:
             handle = scene.add(puppet)
-            for k, x in enumerate(surfaces):
+            for _k, x in enumerate(surfaces):
                 t0 = time.perf_counter()
                 if mode == "update":
                     scene.update(handle, x)

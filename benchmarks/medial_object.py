@@ -241,7 +241,7 @@ def main(argv=None) -> int:
             plain_state.x[obj.dynamic_vertices] += 1e-3   # something to integrate
             bare = Verlet(substeps=substeps, check_energy=False)
 
-            def bare_frame(k):
+            def bare_frame(k, bare=bare, plain=plain, plain_state=plain_state):
                 bare.step(plain, plain_state, FRAME)
 
             for k in range(5):

@@ -448,7 +448,7 @@ def _decode_rows(rows: Iterable[tuple], width: int, name: str, problems: list[st
                  ) -> tuple[np.ndarray, np.ndarray]:
     times, blobs, bad = [], [], 0
     expected = 8 * width
-    for seq, t, data in rows:
+    for _seq, t, data in rows:
         if not isinstance(data, (bytes, bytearray)) or len(data) != expected or t is None \
                 or not math.isfinite(t):
             bad += 1

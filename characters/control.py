@@ -32,7 +32,8 @@ def _pairs(value, name: str):
         rows = [np.asarray(vec, dtype=np.float64).ravel() for vec in value.values()]
         sizes = {row.size for row in rows}
         if len(sizes) != 1:
-            raise ValueError(f"{name} vectors must all have the same size, got sizes {sorted(sizes)}")
+            raise ValueError(
+                f"{name} vectors must all have the same size, got sizes {sorted(sizes)}")
         vectors = np.stack(rows)
     elif isinstance(value, tuple) and len(value) == 2:
         index = np.asarray(value[0])

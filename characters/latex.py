@@ -189,8 +189,8 @@ class LatexPuppet:
         """Advance by dt [s] with finger targets {finger: value}.
 
         A value is a bend (float or (1,), 0 = rest .. 1 = fully open; clipped to [0, 1]) that
-        moves the region along its opening, or a position (3,) [m] for the region's centroid. A finger
-        absent from targets holds its region at rest (the hand stays inside the puppet)."""
+        moves the region along its opening, or a position (3,) [m] for the region's centroid. A
+        finger absent from targets holds its region at rest (the hand stays inside the puppet)."""
         targets = {} if targets is None else targets
         if not isinstance(targets, Mapping):
             raise TypeError(f"targets must be a dict {{finger: value}}, got "
@@ -402,7 +402,7 @@ def _build_layers_to_count(clean: CleanSurface, masses: int, surface_target: int
     """Decimate and build layers, correcting the surface share once when the total node count
     misses `masses` by more than 10%."""
     best = None
-    for attempt in range(3):
+    for _attempt in range(3):
         clock = time.perf_counter()
         decimation = decimate(clean.vertices, clean.faces, target_vertices=surface_target,
                               roundness_weight=roundness_weight,

@@ -167,7 +167,8 @@ class MassSpring:
 
         g = np.zeros(dim) if gravity is None else np.array(gravity, dtype=np.float64)
         if g.shape != (dim,):
-            raise ValueError(f"gravity must have shape ({dim},) for {dim}D positions, got {g.shape}")
+            raise ValueError(
+                f"gravity must have shape ({dim},) for {dim}D positions, got {g.shape}")
         if not np.all(np.isfinite(g)):
             raise ValueError(f"gravity must be finite, got {g}")
         vd = float(velocity_damping)
@@ -179,7 +180,8 @@ class MassSpring:
             f = np.asarray(fixed)
             if f.dtype == bool:
                 if f.shape != (node_count,):
-                    raise ValueError(f"fixed as a mask must have shape ({node_count},), got {f.shape}")
+                    raise ValueError(
+                        f"fixed as a mask must have shape ({node_count},), got {f.shape}")
                 fixed_mask[:] = f
             else:
                 f = f.astype(np.int64).ravel()

@@ -173,7 +173,8 @@ class Motion:
                              "'values': [...]}}")
         pairs = {}
         for name, channel in channels.items():
-            if not isinstance(channel, Mapping) or "times" not in channel or "values" not in channel:
+            if (not isinstance(channel, Mapping) or "times" not in channel
+                    or "values" not in channel):
                 raise ValueError(f"channel {name!r}: expected {{'times': [...], 'values': [...]}}, "
                                  f"got {channel!r:.80}")
             pairs[name] = (channel["times"], channel["values"])

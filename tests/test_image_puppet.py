@@ -475,7 +475,7 @@ def test_baked_playback_deviation_is_bounded(momo_path, mode):
     errors = baked.deviation(times, simulated)
     assert baked.deviation_max == pytest.approx(errors.max())
     # keys are exact, and the article's keys-only playback stays close
-    for t, shape in zip(baked.times, baked.shapes):
+    for t, _shape in zip(baked.times, baked.shapes):
         assert np.array_equal(baked.shape_at(t), simulated[int(round(t * fps))])
     assert baked.key_count < 0.6 * len(simulated)   # 49 keys for 101 frames here
     assert errors.max() < 12.0, errors.max()

@@ -33,7 +33,8 @@ def test_families_and_names():
 
 
 def test_animatron_ordering():
-    # the article: liquid low/low < fabric medium/medium < rigid high/high; rubber stiff, soft damping
+    # the article: liquid low/low < fabric medium/medium < rigid high/high;
+    # rubber stiff, soft damping
     liquid, fabric, rubber, rigid = (material(n) for n in ("liquid", "fabric", "rubber", "rigid"))
     assert liquid.stiffness < fabric.stiffness < rubber.stiffness < rigid.stiffness
     assert liquid.damping < fabric.damping < rigid.damping

@@ -309,7 +309,7 @@ def test_shipped_creature_has_its_joint_tree(creature):
     assert creature.target_names == ("tail", "front", "chest", "head", "skull", "jaw")
     tree = creature.joints
     # binary tree: every cut section has exactly two children; leaves partition the vertices
-    for index, name in enumerate(tree.names):
+    for index, _name in enumerate(tree.names):
         children = tree.children[index]
         assert (children >= 0).sum() in (0, 2)
     leaves = {tree.names[s] for s in np.unique(tree.section_of_vertex)}

@@ -95,7 +95,7 @@ def test_preview_page_shows_follower_state_changing_in_chromium(tmp_path):
     # the page's script filled in both performers' rows: status, action, progress, sigma, L
     for parsed in dumps:
         assert set(parsed.performers) == {"glove", "hand"}
-        for name, cells in parsed.performers.items():
+        for _name, cells in parsed.performers.items():
             assert len(cells) == 6 and cells[1] in ("ok", "silent", "ended"), cells
     frames = [parsed.frame for parsed in dumps]
     assert frames == sorted(frames) and frames[0] < frames[-1]   # the page follows the show

@@ -138,7 +138,8 @@ def test_forces_are_minus_energy_gradient(rng):
         plus, minus = x.copy(), x.copy()
         plus[i, a] += eps
         minus[i, a] -= eps
-        grad = (model.energy(SpringState(plus, v)) - model.energy(SpringState(minus, v))) / (2 * eps)
+        grad = (model.energy(SpringState(plus, v))
+                - model.energy(SpringState(minus, v))) / (2 * eps)
         assert f[i, a] == pytest.approx(-grad, rel=1e-5, abs=1e-6)
     assert model.energy(state) == pytest.approx(
         model.spring_energy(x) - np.sum(model.mass * (x @ model.gravity)))

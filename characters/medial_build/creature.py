@@ -44,7 +44,10 @@ def _ellipsoids():
     return tuple(balls)
 
 
-def caterpillar_sdf(x: float, y: float, z: float, balls=_ellipsoids()) -> float:
+_BALLS = _ellipsoids()
+
+
+def caterpillar_sdf(x: float, y: float, z: float, balls=_BALLS) -> float:
     """Signed distance-like field [m] of the caterpillar, z up: positive inside."""
     inside = -1e9
     for cx, cy, cz, rx, ry, rz in balls:

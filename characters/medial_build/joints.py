@@ -262,7 +262,7 @@ def build_joint_tree(spec: JointSpec, skeleton: np.ndarray, *, edge_length: floa
                     f"{skeleton[members].max(0).round(4).tolist()})")
         axis = _unit3(cut.axis, f"{where}: axis")
         first = len(names)
-        for offset, name in enumerate(cut.names):
+        for _offset, name in enumerate(cut.names):
             names.append(name)
             parent.append(index)
             children.append([-1, -1])

@@ -23,8 +23,8 @@ def register(subparsers) -> None:
     parser.add_argument("image", type=Path, help="picture of a character (PNG/JPEG; a plain "
                         "background or an alpha channel)")
     parser.add_argument("--motion", type=Path, help="motion JSON whose channels drive the pins")
-    parser.add_argument("--out", type=Path, help="output: .mp4, .mkv (lossless), .avi, .webm, .gif, or a "
-                        "folder / name_%%05d.png for PNG frames with alpha")
+    parser.add_argument("--out", type=Path, help="output: .mp4, .mkv (lossless), .avi, .webm, "
+                        ".gif, or a folder / name_%%05d.png for PNG frames with alpha")
     parser.add_argument("--show-mesh", type=Path, metavar="PNG",
                         help="also save a picture of the mesh and pins over the image")
     parser.add_argument("--pins", type=Path, metavar="PINS.json",

@@ -1,4 +1,5 @@
-"""`mop train SESSION`: build every performer's followers and show how confusable the actions are."""
+"""`mop train SESSION`: build every performer's followers and show how confusable the actions
+are."""
 from __future__ import annotations
 
 import time

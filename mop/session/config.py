@@ -185,7 +185,8 @@ class _Reader:
             return None
         return self.table[name]
 
-    def string(self, name: str, *, required: bool = False, empty_is_none: bool = True) -> str | None:
+    def string(self, name: str, *, required: bool = False,
+               empty_is_none: bool = True) -> str | None:
         value = self.raw(name, required)
         if value is None:
             return None
@@ -324,7 +325,8 @@ def parse_session(user: Mapping[str, Any], *, where: str = "<session>",
         raise top.fail("performers", "at least one [performers.NAME] table")
     for performer_name in table.table:
         if not _NAME.match(performer_name):
-            raise table.fail(performer_name, "a name of letters, digits, '_' or '-'", performer_name)
+            raise table.fail(performer_name, "a name of letters, digits, '_' or '-'",
+                             performer_name)
         entry = _Reader(where, _merge(defaults["performer_defaults"],
                                       table.sub(performer_name).table),
                         f"performers.{performer_name}")

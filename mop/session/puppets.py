@@ -6,8 +6,9 @@ its height is the character's `scale` x the frame height, its width follows the 
 Per-kind options (`[characters.NAME.options]` in the session file):
 
 - image: `pins = {name = [x, y]}` driven pins and `anchors = {name = [x, y]}` fixed ones, in
-  picture pixels (default: the picture's `NAME.pins.json` beside it, if any); `cell_size` [px], `mode` ("springs" | "arap"); `material` is the image
-  puppet's ("liquid", "fabric", "rubber", "rigid").
+  picture pixels (default: the picture's `NAME.pins.json` beside it, if any); `cell_size` [px],
+  `mode` ("springs" | "arap"); `material` is the image puppet's ("liquid", "fabric", "rubber",
+  "rigid").
 - latex: anything `LatexPuppet.from_mesh` accepts (e.g. `masses`, `materials` = one preset per
   layer); the asset "froggy" is the shipped frog head (`LatexPuppet.froggy`).
 - medial: `joints` (a joints JSON path or the list of cuts), `constraint`; `material` is a

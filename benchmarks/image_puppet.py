@@ -4,9 +4,9 @@
 
     python benchmarks/image_puppet.py [--quick]
 
-Pictures: the shipped sample character (characters/data/momo.png, 512x512) and the same picture
+Pictures: the shipped sample character (characters/assets/momo.png, 512x512) and the same picture
 upscaled to 2048x2048 (meshed on a 1024 copy, rendered at full size). Motion: its 4 s wave
-(characters/data/momo_wave.json) at 25 fps. Times are wall-clock medians and 90th percentiles on
+(characters/assets/momo_wave.json) at 25 fps. Times are wall-clock medians and 90th percentiles on
 one core (numba kernels are single-threaded), plus the minimum (closest to an idle machine when
 others share it); the first call (compilation) is excluded.
 """
@@ -27,7 +27,7 @@ import characters  # noqa: E402
 from characters import ImagePuppet, Motion  # noqa: E402
 from mop.render.image2d import ImageRenderer  # noqa: E402
 
-DATA = Path(characters.__file__).parent / "data"
+DATA = Path(characters.__file__).parent / "assets"
 FPS = 25.0
 
 

@@ -279,8 +279,8 @@ def rendering(puppet: LatexPuppet, frames: int) -> None:
 # --- 4. decimation quality -----------------------------------------------------------------------
 
 def decimation(quick: bool) -> None:
-    from characters.latex_build import decimate as dec
-    from characters.latex_build.surface import clean_surface, load_mesh
+    from characters.latex import decimate as dec
+    from characters.latex.surface import clean_surface, load_mesh
     print("\n4. Decimation (4.1: quadric + lambda * roundness, normal-flip rejection) vs plain "
           "quadric decimation (fast-simplification)")
     print(f"{'mesh':>8} {'faces':>6} {'method':>22} {'R* mean':>8} {'R* min':>7} {'R*<0.5':>7} "

@@ -32,8 +32,8 @@ def meshes(quick: bool):
     import pybullet_data
     import trimesh
 
-    from characters.medial_build.creature import caterpillar_joints, caterpillar_mesh
-    from characters.medial_build.mesh_input import load_closed_mesh
+    from characters.assets.caterpillar import caterpillar_joints, caterpillar_mesh
+    from characters.medial.mesh_input import load_closed_mesh
 
     joints = caterpillar_joints()
     edges = (0.012, 0.007) if quick else (0.012, 0.009, 0.007, 0.006)

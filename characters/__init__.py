@@ -31,9 +31,9 @@ _EXPORTS = {
     "blend": "characters.motion",
     "Interpolation": "characters.motion",
     # puppet kinds
-    "ImagePuppet": "characters.image_puppet",
-    "LatexPuppet": "characters.latex",
-    "MedialObject": "characters.medial",
+    "ImagePuppet": "characters.image.puppet",
+    "LatexPuppet": "characters.latex.puppet",
+    "MedialObject": "characters.medial.puppet",
 }
 
 __all__ = sorted(_EXPORTS)

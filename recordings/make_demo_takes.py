@@ -90,11 +90,11 @@ SHOWS = {
 
 
 def cutout_pins() -> dict[str, np.ndarray]:
-    """Rest positions [px] of the shipped image character's pins (characters/data/momo)."""
+    """Rest positions [px] of the shipped image character's pins (characters/assets/momo)."""
     import json
 
     import characters
-    path = Path(characters.__file__).resolve().parent / "data" / "momo.pins.json"
+    path = Path(characters.__file__).resolve().parent / "assets" / "momo.pins.json"
     document = json.loads(path.read_text())
     return {name: np.array(pin["xy"], dtype=float) for name, pin in document["pins"].items()}
 

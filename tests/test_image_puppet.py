@@ -129,7 +129,7 @@ def momo_path():
     from pathlib import Path
 
     import characters
-    return Path(characters.__file__).parent / "data" / "momo.png"
+    return Path(characters.__file__).parent / "assets" / "momo.png"
 
 
 @pytest.fixture(scope="module")
@@ -449,7 +449,7 @@ def test_arap_puppet_keeps_shape_better_than_its_pull_and_no_inversion(momo_path
 def _momo_with_motion(momo_path, mode="springs"):
     import characters
     from pathlib import Path
-    data = json.loads((Path(characters.__file__).parent / "data" / "momo_wave.json").read_text())
+    data = json.loads((Path(characters.__file__).parent / "assets" / "momo_wave.json").read_text())
     puppet = ImagePuppet.from_image(momo_path, mode=mode)
     for name, pin in data["pins"].items():
         puppet.add_pin(pin["xy"], name=name, fixed=pin.get("fixed", False))

@@ -12,7 +12,7 @@ from mop.export import CHROMA_GREEN, open_writer, over_colour
 from mop.render.image2d import ImageRenderer, draw_mesh_preview, puppet_preview
 
 cv2 = pytest.importorskip("cv2")
-DATA = Path(characters.__file__).parent / "data"
+DATA = Path(characters.__file__).parent / "assets"
 
 
 @pytest.fixture(scope="module")

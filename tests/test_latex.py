@@ -11,8 +11,8 @@ trimesh = pytest.importorskip("trimesh")
 
 from characters import ImplicitEuler, LatexPuppet, ProjectiveDynamics  # noqa: E402
 from characters.latex import PD_ITERATIONS  # noqa: E402
-from characters.latex_build.layers import tetrahedron_volumes  # noqa: E402
-from characters.latex_build.surface import InsideTest, SurfaceDistance, signed_volume  # noqa: E402
+from characters.latex.layers import tetrahedron_volumes  # noqa: E402
+from characters.latex.surface import InsideTest, SurfaceDistance, signed_volume  # noqa: E402
 
 FINGERS = ("thumb", "index", "middle", "ring", "pinky")
 DT = 1 / 25

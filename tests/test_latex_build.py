@@ -10,12 +10,12 @@ import pytest
 
 trimesh = pytest.importorskip("trimesh")
 
-from characters.latex_build import decimate as dec  # noqa: E402
-from characters.latex_build.connection import (build_connection, edge_graph,  # noqa: E402
+from characters.latex import decimate as dec  # noqa: E402
+from characters.latex.connection import (build_connection, edge_graph,  # noqa: E402
                                                nearest_sources)
-from characters.latex_build.layers import build_layers, tetrahedron_volumes  # noqa: E402
-from characters.latex_build.regions import Opening, parse_regions  # noqa: E402
-from characters.latex_build.surface import (InsideTest, SurfaceDistance,  # noqa: E402
+from characters.latex.layers import build_layers, tetrahedron_volumes  # noqa: E402
+from characters.latex.regions import Opening, parse_regions  # noqa: E402
+from characters.latex.surface import (InsideTest, SurfaceDistance,  # noqa: E402
                                             clean_surface, edge_use_counts, load_mesh)
 
 

@@ -11,9 +11,9 @@ trimesh = pytest.importorskip("trimesh")
 pybullet_data = pytest.importorskip("pybullet_data")
 
 from characters.medial import MedialObject  # noqa: E402
-from characters.medial_build import joints as joint_kernels  # noqa: E402
-from characters.medial_build import mesh_input, skeleton as skeleton_kernels  # noqa: E402
-from characters.medial_build.joints import JointCut, JointSpec  # noqa: E402
+from characters.medial import joints as joint_kernels  # noqa: E402
+from characters.medial import mesh_input, skeleton as skeleton_kernels  # noqa: E402
+from characters.medial.joints import JointCut, JointSpec  # noqa: E402
 
 DATA = pybullet_data.getDataPath()
 BUNNY_CUT = dict(section="body", names=["bottom", "top"], point=[0.0, 0.0, 0.2],
@@ -325,11 +325,11 @@ def test_shipped_creature_has_its_joint_tree(creature):
 
 def creature_path():
     import characters
-    return os.path.join(os.path.dirname(characters.__file__), "data", "medial_caterpillar.obj")
+    return os.path.join(os.path.dirname(characters.__file__), "assets", "medial_caterpillar.obj")
 
 
 def test_shipped_creature_regenerates_identically(tmp_path):
-    from characters.medial_build import creature as builder
+    from characters.assets import caterpillar as builder
 
     paths = builder.write_assets(tmp_path)
     shipped = os.path.dirname(creature_path())

@@ -19,7 +19,7 @@ PRESETS = ("thick skin", "water", "plastic", "skin", "tight cloth")
 
 @pytest.fixture(scope="module")
 def bunny_mesh():
-    from characters.medial_build.mesh_input import load_closed_mesh
+    from characters.medial.mesh_input import load_closed_mesh
     return load_closed_mesh(BUNNY)
 
 
@@ -168,7 +168,7 @@ def test_rotated_section_drags_the_surface_and_the_other_stays(constraint, bunny
 
 @pytest.fixture(scope="module")
 def creature_mesh():
-    from characters.medial_build.creature import caterpillar_joints
+    from characters.assets.caterpillar import caterpillar_joints
     obj = MedialObject.shipped("medial_caterpillar")
     return obj.mesh, caterpillar_joints()
 
@@ -226,7 +226,7 @@ def test_several_sections_at_once_follow_their_chain(creature_mesh):
 def test_shipped_motion_drives_the_creature():
     obj = MedialObject.shipped("medial_caterpillar", constraint="spring_reduction")
     import characters
-    folder = os.path.join(os.path.dirname(characters.__file__), "data")
+    folder = os.path.join(os.path.dirname(characters.__file__), "assets")
     motion = Motion.load(os.path.join(folder, "medial_caterpillar.motion.json"))
     fps = 25
     jaw = obj.joints.vertices_of("jaw")

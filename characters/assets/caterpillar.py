@@ -6,9 +6,9 @@ triangles well shaped, which the medial skeleton and the springs both need). Uni
 creature is about 0.44 m long, a hand-puppet size. Axes as mop's 3D renderer expects them: +y up,
 the head towards +x, its left side towards +z (the field below is written z-up and turned).
 
-``python -m characters.medial_build.creature [DIR]`` rewrites the assets in characters/data/:
+``python -m characters.assets.caterpillar [DIR]`` rewrites the assets in characters/assets/:
 ``medial_caterpillar.obj`` (surface), ``medial_caterpillar.joints.json`` (sections, planes,
-pivots, axes; the format of ``medial_build.joints.JointSpec``) and
+pivots, axes; the format of ``characters.medial.joints.JointSpec``) and
 ``medial_caterpillar.motion.json`` (a demo clip addressing the sections by name).
 """
 from __future__ import annotations
@@ -18,10 +18,10 @@ from pathlib import Path
 
 import numpy as np
 
-from .joints import JointCut, JointSpec
+from ..medial.joints import JointCut, JointSpec
 
 NAME = "medial_caterpillar"
-DATA = Path(__file__).resolve().parent.parent / "data"
+DATA = Path(__file__).resolve().parent
 
 _SEGMENTS_X = (0.0, 0.07, 0.14, 0.21)
 _HEAD = (0.30, 0.0, 0.085, 0.075, 0.066, 0.064)      # centre (x, y, z), radii (x, y, z) [m]

@@ -8,8 +8,8 @@ thumb on its floor; opening the hand turns them about the hinge, which opens the
 
 Units are metres; +y is up, +z is the front (the frog looks along +z).
 
-Regenerate the shipped files with ``python -m characters.latex_build.froggy``: it writes
-characters/data/froggy.ply and characters/data/froggy.json.
+Regenerate the shipped files with ``python -m characters.assets.froggy``: it writes
+characters/assets/froggy.ply and characters/assets/froggy.json.
 """
 from __future__ import annotations
 
@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-DATA = Path(__file__).resolve().parent.parent / "data"
+DATA = Path(__file__).resolve().parent
 
 # shape parameters [m]
 HEAD_RADII = (0.12, 0.072, 0.105)
@@ -126,7 +126,7 @@ def generate(edge_length: float = 0.0065):
     vertices = np.asarray(mesh.vert_properties, dtype=np.float64)[:, :3]
     faces = np.asarray(mesh.tri_verts, dtype=np.int64)
     # level_set keeps the larger component structure; make sure the winding is outward
-    from .surface import clean_surface
+    from ..latex.surface import clean_surface
     clean = clean_surface(vertices, faces, source="froggy")
     vertices, faces = clean.vertices, clean.faces
     colours = _colours(vertices)
@@ -140,7 +140,7 @@ def _on_slit_side(vertices, upper: bool):
 
 
 def _sidecar(vertices: np.ndarray, faces: np.ndarray) -> dict:
-    from .regions import Opening, RegionSpec, sidecar_dict, _components
+    from ..latex.regions import Opening, RegionSpec, sidecar_dict, _components
     hinge = (0.0, MOUTH_Y, HINGE_Z)
     regions = {}
 

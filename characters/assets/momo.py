@@ -1,6 +1,6 @@
 """Draw the sample image-puppet character "Momo" and write its pins and a motion.
 
-Run `python -m characters.data.make_image_puppet_sample` to regenerate (deterministic):
+Run `python -m characters.assets.momo` to regenerate (deterministic):
 - momo.png: 512x512 RGB, a friendly cartoon monster on a plain cream background (drawn here
   with Pillow at 4x and downsampled, so the edges are antialiased like a real drawing);
 - momo.pins.json: pin sidecar (hands and head driven, feet anchored);

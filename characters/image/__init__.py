@@ -1,4 +1,4 @@
-"""The parts of an image puppet (characters.ImagePuppet lives in characters/image_puppet.py):
+"""2D image puppets: `ImagePuppet` (runtime, in `puppet`) and the parts it is built from.
 
 - background.py: picture -> character mask and feathered alpha (corner colour + tolerance, or
   the picture's own alpha), largest component, hole filling
@@ -6,6 +6,19 @@
 - arap.py: two-step as-rigid-as-possible deformation (Igarashi et al. 2005), factorised per pin set
 - guard.py: a constraint that keeps mass-spring triangles from folding over
 - bake.py: keyframe baking and linear-blend playback, with the deviation it costs
+- puppet.py: `ImagePuppet`, which composes them
 
 Building needs OpenCV (pip install 'mop[image]'); everything else is NumPy, SciPy and numba.
+The sample picture and its generator are in `characters.assets` (momo).
 """
+
+_EXPORTS = ("ImagePuppet", "PuppetMode", "Pin")
+__all__ = list(_EXPORTS)
+
+
+def __getattr__(name):
+    # the runtime is imported when first asked for, so that a builder module stays light
+    if name in _EXPORTS:
+        from . import puppet
+        return getattr(puppet, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

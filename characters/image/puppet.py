@@ -45,16 +45,16 @@ from typing import Mapping
 
 import numpy as np
 
-from .control import Control
-from .image.arap import ArapDeformer
-from .image.background import load_image, remove_background, require_cv2
-from .image.bake import BakedMotion, bake_motion
-from .image.guard import NoFoldConstraint
-from .image.mesh import GridMesh, build_grid_mesh, signed_areas
-from .integrators import Verlet
-from .materials import Material, material_names
-from .materials import material as lookup_material
-from .model import MassSpring
+from ..control import Control
+from ..integrators import Verlet
+from ..materials import Material, material_names
+from ..materials import material as lookup_material
+from ..model import MassSpring
+from .arap import ArapDeformer
+from .background import load_image, remove_background, require_cv2
+from .bake import BakedMotion, bake_motion
+from .guard import NoFoldConstraint
+from .mesh import GridMesh, build_grid_mesh, signed_areas
 
 log = logging.getLogger(__name__)
 
@@ -225,7 +225,7 @@ class ImagePuppet:
                 rim = cv2.dilate(mask.astype(np.uint8), np.ones((5, 5), np.uint8)).astype(bool)
                 alpha = np.where(rim, picture[:, :, 3], 0).astype(np.uint8)
             else:
-                from .image.background import feather_alpha
+                from .background import feather_alpha
                 alpha = feather_alpha(mask, feather / scale)
             rgba = np.dstack([picture[:, :, :3], alpha])
         else:

@@ -7,7 +7,7 @@ low-resolution, three-layer tetrahedral mass-spring mesh, driven by a glove's fi
     q.step(1 / 25, {"thumb": 1.0, "index": 1.0})        # finger bends: 0 rest .. 1 open
     q.surface()                                          # (V, 3) deformed visual vertices
 
-Building (see characters/latex_build/): the surface is cleaned and closed, decimated with the
+Building (see characters/latex/): the surface is cleaned and closed, decimated with the
 paper's combined quadric + roundness priority and normal-flip rejection, keeping the marked
 finger regions (4.1); two fronts of biting-sphere points inside it give three node layers,
 connected by Delaunay tetrahedra (4.2); each layer's springs and masses come from its material
@@ -27,21 +27,21 @@ from typing import Mapping
 
 import numpy as np
 
-from .control import Control
-from .integrators import ImplicitEuler, Integrator, ProjectiveDynamics, Verlet
-from .latex_build import connection as _connection
-from .latex_build.decimate import Decimation, decimate, roundness, target_edge_length
-from .latex_build.layers import LAYER_NAMES, Layers, build_layers, tetrahedron_volumes
-from .latex_build.regions import (Opening, auto_regions, default_opening, parse_regions,
-                                  resolve_regions, spread_subset)
-from .latex_build.surface import (CleanSurface, InsideTest, SurfaceDistance, clean_surface,
-                                  load_mesh, signed_volume)
-from .materials import Material, material
-from .model import MassSpring
+from ..control import Control
+from ..integrators import ImplicitEuler, Integrator, ProjectiveDynamics, Verlet
+from ..materials import Material, material
+from ..model import MassSpring
+from . import connection as _connection
+from .decimate import Decimation, decimate, roundness, target_edge_length
+from .layers import LAYER_NAMES, Layers, build_layers, tetrahedron_volumes
+from .regions import (Opening, auto_regions, default_opening, parse_regions,
+                      resolve_regions, spread_subset)
+from .surface import (CleanSurface, InsideTest, SurfaceDistance, clean_surface,
+                      load_mesh, signed_volume)
 
 log = logging.getLogger(__name__)
 
-DATA = Path(__file__).resolve().parent / "data"
+DATA = Path(__file__).resolve().parent.parent / "assets"
 FROGGY = DATA / "froggy.ply"
 
 #: default material preset of each layer (latex skin, foam, hand cavity), characters/materials.toml
@@ -253,7 +253,7 @@ class LatexPuppet:
     # --- building -------------------------------------------------------------------------------
     @classmethod
     def froggy(cls, *, masses: int = 2000, **options) -> "LatexPuppet":
-        """The shipped frog head (characters/data/froggy.ply + froggy.json)."""
+        """The shipped frog head (characters/assets/froggy.ply + froggy.json)."""
         return cls.from_mesh(FROGGY, masses=masses, **options)
 
     @classmethod

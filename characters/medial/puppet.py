@@ -3,7 +3,7 @@ skeleton by bone springs, animated by rotating joint sections.
 
 Build with :meth:`MedialObject.from_mesh`:
 
-1. skeletonisation (``medial_build.skeleton``): one skeletal point per surface vertex, from the
+1. skeletonisation (``skeleton``): one skeletal point per surface vertex, from the
    Voronoi cells of the surface points, on the negative vertex normal;
 2. mass-spring system: surface nodes and springs on the mesh edges; per vertex an inner bone
    point at ``p - f_bd (p - s)`` and an outer one at ``p + f_bd (p - s)`` (the reflection through
@@ -12,7 +12,7 @@ Build with :meth:`MedialObject.from_mesh`:
 3. constraints on the bone springs, chosen per object: the circumsphere method (a node stays within
    ``(f_max - 1) L`` of its rest position, which moves with its bones) or spring reduction (both
    bone springs stay within ``[f_min, f_max] L``, iterated);
-4. joints (``medial_build.joints``): planes cut the skeleton into sections that form a binary
+4. joints (``joints``): planes cut the skeleton into sections that form a binary
    tree; a section's angle rotates its bone points about the cut's pivot.
 
 Node layout of ``model``: surface nodes ``0..V-1``, inner bone points ``V..2V-1``, outer bone
@@ -30,15 +30,15 @@ from typing import Mapping
 
 import numpy as np
 
-from .constraints import CircumsphereConstraint
-from .control import Control
-from .integrators import Verlet
-from .medial_build import joints as joint_kernels
-from .medial_build.constraints import BoneSpringReduction
-from .medial_build.joints import JointCut, JointSpec, JointTree
-from .medial_build.mesh_input import load_closed_mesh
-from .medial_build.skeleton import Skeleton, skeletonize
-from .model import MassSpring
+from ..constraints import CircumsphereConstraint
+from ..control import Control
+from ..integrators import Verlet
+from ..model import MassSpring
+from . import joints as joint_kernels
+from .constraints import BoneSpringReduction
+from .joints import JointCut, JointSpec, JointTree
+from .mesh_input import load_closed_mesh
+from .skeleton import Skeleton, skeletonize
 
 log = logging.getLogger(__name__)
 
@@ -123,7 +123,7 @@ def _as_medial_material(material) -> MedialMaterial:
         if missing:
             raise ValueError(f"material is missing {sorted(missing)}")
         return MedialMaterial(**{k: (v if k == "name" else float(v)) for k, v in values.items()})
-    from . import materials as core_materials
+    from .. import materials as core_materials
 
     if isinstance(material, str):
         # the paper's names have spaces ("thick skin"); the preset table uses underscores
@@ -229,7 +229,7 @@ class MedialObject:
                 constraints.append(CircumsphereConstraint(dyn, radius=radius, name="medial_sphere"))
             else:
                 # the core's SpringReductionConstraint on the bone springs, computed per mass
-                # point with an early stop (same results, tested; see medial_build/constraints)
+                # point with an early stop (same results, tested; see medial/constraints)
                 constraints.append(BoneSpringReduction(
                     dyn, vertex_count + dyn, 2 * vertex_count + dyn, self.bone_rest_length[dyn],
                     min_factor=material.min_factor, max_factor=material.max_factor,
@@ -323,11 +323,11 @@ class MedialObject:
 
     @classmethod
     def shipped(cls, name: str = "medial_caterpillar", **options) -> "MedialObject":
-        """A creature shipped in characters/data/: NAME.obj with its NAME.joints.json.
+        """A creature shipped in characters/assets/: NAME.obj with its NAME.joints.json.
 
         options : passed to :meth:`from_mesh` (material, constraint, ...).
         """
-        folder = Path(__file__).resolve().parent / "data"
+        folder = Path(__file__).resolve().parent.parent / "assets"
         mesh = folder / f"{name}.obj"
         joints = folder / f"{name}.joints.json"
         if not mesh.exists() or not joints.exists():

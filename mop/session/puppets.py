@@ -32,11 +32,11 @@ LAYER_MARGIN = 0.12   # free border around a character in its layer [fraction of
 
 def data_folder() -> Path:
     import characters
-    return Path(characters.__file__).resolve().parent / "data"
+    return Path(characters.__file__).resolve().parent / "assets"
 
 
 def resolve_asset(character: CharacterConfig, suffixes: tuple[str, ...]) -> Path:
-    """A path as given, or a file shipped in characters/data/ named `asset` + a known suffix."""
+    """A path as given, or a file shipped in characters/assets/ named `asset` + a known suffix."""
     path = Path(character.asset)
     if path.exists():
         return path

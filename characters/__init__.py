@@ -3,46 +3,23 @@ and the three puppet kinds (image, latex, medial).
 
 Names are resolved lazily so that importing one puppet kind never pulls in the heavy
 dependencies of another (trimesh, OpenCV, pyrender)."""
-from importlib import import_module
+import lazy_loader
 
-_EXPORTS = {
+__getattr__, __dir__, __all__ = lazy_loader.attach(__name__, submod_attrs={
     # core (model / state / control)
-    "MassSpring": "characters.model",
-    "SpringState": "characters.model",
-    "Control": "characters.control",
+    "model": ["MassSpring", "SpringState", "tetrahedral_lattice"],
+    "control": ["Control"],
     # integrators
-    "ImplicitEuler": "characters.integrators",
-    "Verlet": "characters.integrators",
-    "ProjectiveDynamics": "characters.integrators",
-    "StepReport": "characters.integrators",
-    "Integrator": "characters.integrators",
-    "StepFailure": "characters.integrators",
-    "default_integrator": "characters.integrators",
+    "integrators": ["ImplicitEuler", "Verlet", "ProjectiveDynamics", "StepReport", "Integrator",
+                    "StepFailure", "default_integrator"],
     # constraints and materials
-    "CircumsphereConstraint": "characters.constraints",
-    "SpringReductionConstraint": "characters.constraints",
-    "Material": "characters.materials",
-    "material": "characters.materials",
-    "material_names": "characters.materials",
-    "load_materials": "characters.materials",
-    "tetrahedral_lattice": "characters.model",
+    "constraints": ["CircumsphereConstraint", "SpringReductionConstraint"],
+    "materials": ["Material", "material", "material_names", "load_materials"],
     # motion clips
-    "Motion": "characters.motion",
-    "blend": "characters.motion",
-    "Interpolation": "characters.motion",
-    # puppet kinds
-    "ImagePuppet": "characters.image.puppet",
-    "LatexPuppet": "characters.latex.puppet",
-    "MedialObject": "characters.medial.puppet",
-}
-
-__all__ = sorted(_EXPORTS)
-
-
-def __getattr__(name):
-    module = _EXPORTS.get(name)
-    if module is None:
-        raise AttributeError(f"module 'characters' has no attribute {name!r}")
-    value = getattr(import_module(module), name)
-    globals()[name] = value
-    return value
+    "motion": ["Motion", "blend", "Interpolation"],
+    # the shape every puppet kind shares, and the kinds (one package each)
+    "puppet": ["Puppet"],
+    "image.puppet": ["ImagePuppet"],
+    "latex.puppet": ["LatexPuppet"],
+    "medial.puppet": ["MedialObject"],
+})

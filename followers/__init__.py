@@ -4,49 +4,24 @@ action is being performed.
 
 Names are resolved lazily so that ``import followers`` stays cheap (numba compiles, from its
 cache, only when a follower is first built)."""
-from importlib import import_module
+import lazy_loader
 
-_EXPORTS = {
+__getattr__, __dir__, __all__ = lazy_loader.attach(__name__, submod_attrs={
     # one follower
-    "Follower": "followers.follower",
-    "FollowerOutput": "followers.follower",
-    "FollowerTrace": "followers.follower",
+    "follower": ["Follower", "FollowerOutput", "FollowerTrace"],
     # transition models
-    "TransitionModel": "followers.transitions",
-    "transition_model": "followers.transitions",
+    "transitions": ["TransitionModel", "transition_model"],
     # the bank of one performer
-    "FollowerBank": "followers.bank",
-    "BankOutput": "followers.bank",
+    "bank": ["FollowerBank", "BankOutput"],
     # preparing demonstrations (MOP 3.1.3)
-    "ChannelNormaliser": "followers.preprocessing",
-    "fit_normaliser": "followers.preprocessing",
-    "normalise": "followers.preprocessing",
-    "align": "followers.preprocessing",
-    "resample": "followers.preprocessing",
-    "fill_gaps": "followers.preprocessing",
-    "time_warp": "followers.preprocessing",
+    "preprocessing": ["ChannelNormaliser", "fit_normaliser", "normalise", "align", "resample",
+                      "fill_gaps", "time_warp"],
     # defaults estimated from templates
-    "default_sigma": "followers.defaults",
-    "default_window": "followers.defaults",
+    "defaults": ["default_sigma", "default_window"],
     # training from several demonstrations
-    "train_hmm": "followers.training",
-    "train_follower": "followers.training",
-    "TrainedModel": "followers.training",
+    "training": ["train_hmm", "train_follower", "TrainedModel"],
     # feedback after recording
-    "confusability": "followers.confusion",
-    "Confusability": "followers.confusion",
+    "confusion": ["confusability", "Confusability"],
     # published gesture recordings (.ts files)
-    "read_ts": "followers.datasets",
-    "aeon_dataset": "followers.datasets",
-}
-
-__all__ = sorted(_EXPORTS)
-
-
-def __getattr__(name):
-    module = _EXPORTS.get(name)
-    if module is None:
-        raise AttributeError(f"module 'followers' has no attribute {name!r}")
-    value = getattr(import_module(module), name)
-    globals()[name] = value
-    return value
+    "datasets": ["read_ts", "aeon_dataset"],
+})

@@ -12,13 +12,9 @@ Building needs OpenCV (pip install 'mop[image]'); everything else is NumPy, SciP
 The sample picture and its generator are in `characters.assets` (momo).
 """
 
-_EXPORTS = ("ImagePuppet", "PuppetMode", "Pin")
-__all__ = list(_EXPORTS)
+import lazy_loader
 
-
-def __getattr__(name):
-    # the runtime is imported when first asked for, so that a builder module stays light
-    if name in _EXPORTS:
-        from . import puppet
-        return getattr(puppet, name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+# the runtime is imported when first asked for, so that a builder module stays light
+__getattr__, __dir__, __all__ = lazy_loader.attach(__name__, submod_attrs={
+    "puppet": ["ImagePuppet", "PuppetMode", "Pin"],
+})

@@ -10,16 +10,13 @@ Modules: `config` (the session file), `build` (config -> running parts), `loop` 
 the per-frame work), `feeds` (performer input), `outputs` (video, PNG, OSC), `preview` (the live
 web page), `timing` (per-stage timing and the report).
 """
+import lazy_loader
+
 from .config import SessionConfig, SessionError, load_session, parse_session
 from .loop import Mode, Session
 
+# build pulls in capture / followers / characters: only when asked for
+__getattr__, _, _lazy = lazy_loader.attach(__name__, submod_attrs={
+    "build": ["build_session", "Overrides"]})
 __all__ = ["SessionConfig", "SessionError", "load_session", "parse_session", "Mode", "Session",
-           "build_session", "Overrides"]
-
-
-def __getattr__(name):
-    # build pulls in capture / followers / characters: only when asked for
-    if name in ("build_session", "Overrides"):
-        from . import build
-        return getattr(build, name)
-    raise AttributeError(f"module 'mop.session' has no attribute {name!r}")
+           *_lazy]

@@ -1,7 +1,12 @@
-"""Characters of a session: build each puppet kind from its asset, and its layer renderer.
+"""Characters of a session: the registry of puppet kinds, each kind's builder and its layer.
 
-A layer renderer has `render(puppet) -> (h, w, 4) uint8 RGBA` (straight alpha) and `close()`;
-its height is the character's `scale` x the frame height, its width follows the character.
+    KINDS[CharacterKind.LATEX](character, height) -> (puppet, layer renderer)
+
+A puppet satisfies `characters.Puppet`. A layer renderer has `render(puppet) -> (h, w, 4)
+uint8 RGBA` (straight alpha) and `close()`; its height is the character's `scale` x the frame
+height, its width follows the character. A new kind is a package under `characters/` plus a
+builder here registered with `@register(CharacterKind.NAME)` (and the name in
+`config.CharacterKind`, the closed set a session file may name).
 
 Per-kind options (`[characters.NAME.options]` in the session file):
 
@@ -20,6 +25,7 @@ from __future__ import annotations
 
 import logging
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 
@@ -28,6 +34,22 @@ from .config import CharacterConfig, CharacterKind, SessionError
 log = logging.getLogger(__name__)
 
 LAYER_MARGIN = 0.12   # free border around a character in its layer [fraction of its size]
+
+
+#: (character, layer height [px]) -> (puppet, layer renderer): one builder per kind
+Builder = Callable[[CharacterConfig, int], tuple]
+
+KINDS: dict[CharacterKind, Builder] = {}
+
+
+def register(kind: CharacterKind):
+    """Decorator: the function becomes the builder of `kind`."""
+    def decorate(build: Builder) -> Builder:
+        if kind in KINDS:
+            raise ValueError(f"puppet kind {kind.value!r} is registered already")
+        KINDS[kind] = build
+        return build
+    return decorate
 
 
 def data_folder() -> Path:
@@ -75,18 +97,23 @@ def _points(character: CharacterConfig, name: str) -> dict[str, tuple[float, flo
 def build(character: CharacterConfig, *, frame_height: int):
     """(puppet, layer renderer) for one character."""
     height = max(8, int(round(character.scale * frame_height)))
-    if character.kind is CharacterKind.IMAGE:
-        return _image(character, height)
-    if character.kind is CharacterKind.LATEX:
-        return _latex(character, height)
-    return _medial(character, height)
+    builder = KINDS.get(character.kind)
+    if builder is None:
+        raise SessionError(f"characters.{character.name}.kind: no builder registered for "
+                           f"{character.kind.value!r}; registered: "
+                           f"{', '.join(k.value for k in KINDS)}")
+    return builder(character, height)
 
 
 # 2D image puppets ----------------------------------------------------------------------------
 
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".webp")
+
+
+@register(CharacterKind.IMAGE)
 def _image(character: CharacterConfig, height: int):
     from characters import ImagePuppet
-    path = resolve_asset(character, (".png", ".jpg", ".jpeg", ".webp"))
+    path = resolve_asset(character, IMAGE_SUFFIXES)
     known = {"pins", "anchors", "cell_size", "mode"}
     unknown = set(character.options) - known
     if unknown:
@@ -194,6 +221,10 @@ def _mesh_layer(character: CharacterConfig, puppet, height: int, colour):
     return SceneLayer(puppet, height=height, colour=colour, camera=camera)
 
 
+LATEX_SUFFIXES = (".ply", ".obj", ".stl", ".off", ".glb")
+
+
+@register(CharacterKind.LATEX)
 def _latex(character: CharacterConfig, height: int):
     from characters import LatexPuppet
     options = {k: v for k, v in character.options.items() if k != "camera"}
@@ -204,17 +235,21 @@ def _latex(character: CharacterConfig, height: int):
     if character.asset == "froggy" and not Path(character.asset).exists():
         puppet = LatexPuppet.froggy(**options)        # the shipped frog head
     else:
-        path = resolve_asset(character, (".ply", ".obj", ".stl", ".off", ".glb"))
+        path = resolve_asset(character, LATEX_SUFFIXES)
         puppet = LatexPuppet.from_mesh(str(path), **options)
     return puppet, _mesh_layer(character, puppet, height, character.colour)
 
 
+MEDIAL_SUFFIXES = (".obj", ".ply", ".stl", ".off", ".glb")
+
+
+@register(CharacterKind.MEDIAL)
 def _medial(character: CharacterConfig, height: int):
     from characters import MedialObject
     options = {k: v for k, v in character.options.items() if k != "camera"}
     if character.material:
         options["material"] = character.material
-    path = resolve_asset(character, (".obj", ".ply", ".stl", ".off", ".glb"))
+    path = resolve_asset(character, MEDIAL_SUFFIXES)
     joints = options.get("joints")
     if isinstance(joints, str) and not Path(joints).is_absolute():
         for base in (path.parent, data_folder()):

@@ -41,15 +41,17 @@ import numpy as np
 
 CHROMA_GREEN = (0, 177, 64)   # the usual broadcast chroma-key green
 DEFAULT_OPAQUE_BACKGROUND = (255, 255, 255)
+CHROMA_BLUE = (0, 71, 187)    # the usual broadcast chroma-key blue
 _NAMED = {"white": (255, 255, 255), "black": (0, 0, 0), "chroma": CHROMA_GREEN,
-          "green": CHROMA_GREEN}
+          "green": CHROMA_GREEN, "blue": CHROMA_BLUE}
 
 
 # --- colours and compositing -------------------------------------------------------------
 
 def parse_background(background) -> tuple[int, int, int] | None:
-    """"transparent" / None -> None; "chroma", "white", "black", "#rrggbb", "#rgb" or an
-    (r, g, b) triple of ints in 0..255 -> (r, g, b)."""
+    """mop's one colour parser. "transparent" / None -> None; "chroma" (key green), "blue" (key
+    blue), "white", "black", "#rrggbb", "#rgb" or an (r, g, b) triple of ints in 0..255 ->
+    (r, g, b)."""
     if background is None:
         return None
     if isinstance(background, str):
@@ -62,8 +64,8 @@ def parse_background(background) -> tuple[int, int, int] | None:
             return tuple(int(text[i:i + 2], 16) for i in (1, 3, 5))
         if re.fullmatch(r"#[0-9a-f]{3}", text):
             return tuple(17 * int(c, 16) for c in text[1:])
-        raise ValueError(f"background must be 'transparent', 'chroma', 'white', 'black' or a "
-                         f"colour '#rrggbb', got {background!r}")
+        raise ValueError(f"background must be 'transparent', 'chroma', 'blue', 'white', 'black' "
+                         f"or a colour '#rrggbb', got {background!r}")
     try:
         values = [int(v) for v in background]
     except (TypeError, ValueError):
@@ -93,18 +95,18 @@ def over_colour(rgba: np.ndarray, colour, out: np.ndarray | None = None) -> np.n
 
     colour : anything `parse_background` takes except transparent. out : optional (H, W, 3)
     uint8 buffer to write into."""
+    from mop.render.compose import blend_over
     rgba = _as_rgba(rgba)
     rgb = parse_background(colour)
     if rgb is None:
         raise ValueError("over_colour needs a colour, got 'transparent'")
-    alpha = rgba[:, :, 3:4].astype(np.uint16)
-    blended = rgba[:, :, :3] * alpha + np.asarray(rgb, np.uint16) * (255 - alpha)
-    # exact rounding of x / 255 for x in 0..65025
-    blended += 128
-    blended = (blended + (blended >> 8)) >> 8
+    canvas = np.empty(rgba.shape, np.uint8)
+    canvas[:, :, :3] = rgb
+    canvas[:, :, 3] = 255
+    blend_over(canvas, np.ascontiguousarray(rgba), 0, 0, opaque=True)
     if out is None:
-        return blended.astype(np.uint8)
-    np.copyto(out, blended, casting="unsafe")
+        return canvas[:, :, :3].copy()
+    np.copyto(out, canvas[:, :, :3])
     return out
 
 
@@ -116,34 +118,20 @@ def compose_layers(layers: Iterable, *, size: tuple[int, int],
         (rgba, (x, y)) placing the layer's top-left corner at pixel (x, y); parts outside the
         frame are clipped. size : (width, height) [px] of the frame.
     Returns (height, width, 4) uint8 RGBA, straight alpha (alpha 255 over a colour)."""
+    from mop.render.compose import blend_over
     width, height = _check_size(size)
     colour = parse_background(background)
-    premultiplied = np.zeros((height, width, 4), np.float32)
+    out = np.zeros((height, width, 4), np.uint8)
     if colour is not None:
-        premultiplied[:, :, :3] = np.asarray(colour, np.float32) / 255.0
-        premultiplied[:, :, 3] = 1.0
+        out[:, :, :3] = colour
+        out[:, :, 3] = 255
     for index, layer in enumerate(layers):
         x0 = y0 = 0
         if isinstance(layer, tuple):
             layer, (x0, y0) = layer
             x0, y0 = int(round(x0)), int(round(y0))
-        layer = _as_rgba(layer, f"layer {index}")
-        h, w = layer.shape[:2]
-        xa, ya, xb, yb = max(x0, 0), max(y0, 0), min(x0 + w, width), min(y0 + h, height)
-        if xa >= xb or ya >= yb:
-            continue
-        src = layer[ya - y0:yb - y0, xa - x0:xb - x0].astype(np.float32) / 255.0
-        a = src[:, :, 3:4]
-        dst = premultiplied[ya:yb, xa:xb]
-        dst *= 1.0 - a
-        dst[:, :, :3] += src[:, :, :3] * a
-        dst[:, :, 3:4] += a
-    alpha = premultiplied[:, :, 3:4]
-    rgb = np.divide(premultiplied[:, :, :3], alpha, out=np.zeros_like(premultiplied[:, :, :3]),
-                    where=alpha > 0)
-    out = np.empty((height, width, 4), np.uint8)
-    out[:, :, :3] = np.clip(rgb * 255.0 + 0.5, 0, 255)
-    out[:, :, 3:] = np.clip(alpha * 255.0 + 0.5, 0, 255)
+        layer = np.ascontiguousarray(_as_rgba(layer, f"layer {index}"))
+        blend_over(out, layer, x0, y0, opaque=colour is not None)
     return out
 
 

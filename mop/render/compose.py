@@ -2,6 +2,8 @@
 
 Every character renders into its own RGBA layer (straight alpha, uint8); `Stage` places the layers
 into one frame over a colour, a chroma-key colour or transparency, back to front in session order.
+`blend_over` is mop's one compositor: `mop.export.compose_layers` and `over_colour` use it too.
+Colours are parsed by `mop.export.parse_background`.
 """
 from __future__ import annotations
 
@@ -9,13 +11,6 @@ import numpy as np
 from numba import njit
 
 _JIT = dict(cache=True, nogil=True, fastmath=False, error_model="numpy")
-
-
-def parse_colour(text: str) -> tuple[int, int, int]:
-    """'#rrggbb' -> (r, g, b) ints in 0..255."""
-    if not isinstance(text, str) or len(text) != 7 or text[0] != "#":
-        raise ValueError(f"expected a colour '#rrggbb', got {text!r}")
-    return tuple(int(text[i:i + 2], 16) for i in (1, 3, 5))
 
 
 def blend_over(canvas: np.ndarray, layer: np.ndarray, x0: int, y0: int, *,

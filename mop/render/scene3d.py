@@ -16,7 +16,7 @@ see benchmarks/latex_puppet.py for the measured effect. Close the scene (or use 
 the OpenGL context.
 
 Backgrounds: "transparent" (alpha 0 around the puppet), "chroma" (pure key green, opaque, for a
-vision mixer's chroma keyer), "blue" (key blue) or any (r, g, b[, a]) in 0..255.
+vision mixer's chroma keyer), "blue" (key blue), "#rrggbb" or (r, g, b) in 0..255.
 """
 from __future__ import annotations
 
@@ -30,6 +30,8 @@ from dataclasses import dataclass  # noqa: E402
 
 import numpy as np  # noqa: E402
 from numba import njit  # noqa: E402
+
+from mop import export  # noqa: E402
 
 if not hasattr(np, "infty"):  # pyrender 0.1.45 still uses np.infty, removed in NumPy 2
     np.infty = np.inf
@@ -105,30 +107,13 @@ CAMERAS = {
     "below": (0.2, -0.6, 0.8),
 }
 
-BACKGROUNDS = {
-    "transparent": (0, 0, 0, 0),
-    "chroma": (0, 177, 64, 255),
-    "blue": (0, 71, 187, 255),
-    "black": (0, 0, 0, 255),
-    "white": (255, 255, 255, 255),
-}
-
-
 def parse_background(background) -> tuple[float, float, float, float]:
-    """A background name or (r, g, b[, a]) 0..255 -> (r, g, b, a) in 0..1."""
-    if isinstance(background, str):
-        if background not in BACKGROUNDS:
-            raise ValueError(f"background must be one of {sorted(BACKGROUNDS)} or (r, g, b[, a]) "
-                             f"in 0..255, got {background!r}")
-        rgba = BACKGROUNDS[background]
-    else:
-        rgba = tuple(np.asarray(background, dtype=np.float64).ravel())
-        if len(rgba) == 3:
-            rgba = rgba + (255.0,)
-        if len(rgba) != 4 or not all(0 <= c <= 255 for c in rgba):
-            raise ValueError(f"background must be a name or (r, g, b[, a]) in 0..255, got "
-                             f"{background!r}")
-    return tuple(float(c) / 255.0 for c in rgba)
+    """Anything `mop.export.parse_background` takes -> pyrender's (r, g, b, a) in 0..1
+    (transparent: alpha 0)."""
+    rgb = export.parse_background(background)
+    if rgb is None:
+        return (0.0, 0.0, 0.0, 0.0)
+    return (*(c / 255.0 for c in rgb), 1.0)
 
 
 @njit(**_JIT)
@@ -353,7 +338,7 @@ class Scene3D:
     """A pyrender scene built once; meshes' vertices change per frame.
 
     size : (width, height) [px]; camera : a CAMERAS name or a (4, 4) camera pose;
-    background : a BACKGROUNDS name or (r, g, b[, a]) 0..255; antialias : 4x multisampling
+    background : see `parse_background`; antialias : 4x multisampling
     (slower on software rasterisers); yfov : vertical field of view [rad];
     lights : "studio" (key, fill, rim directional lights) or "flat" (one headlight).
     """

@@ -38,6 +38,8 @@ from pathlib import Path
 from types import MappingProxyType
 from typing import Any, Mapping
 
+from mop.export import parse_background
+
 DEFAULTS_PATH = Path(__file__).with_name("defaults.toml")
 FRAME_RATES = (25, 30, 50, 60)
 REPLAY_PREFIX = "replay:"   # a performer source that replays a take of the session's store
@@ -246,7 +248,7 @@ class _Reader:
             return None
         if not isinstance(value, str) or not _COLOUR.match(value):
             raise self.fail(name, "a colour '#rrggbb'", value)
-        return tuple(int(value[i:i + 2], 16) for i in (1, 3, 5))
+        return parse_background(value)
 
     def sub(self, name: str) -> "_Reader":
         value = self.raw(name)

@@ -75,39 +75,10 @@ def parse_pins(pins, where: str) -> dict:
     return parsed
 
 
-class Progress:
-    """A one-line progress bar on stderr (redrawn in place when stderr is a terminal)."""
-
-    def __init__(self, total: int, label: str, *, stream=None, width: int = 30):
-        self.total = max(1, total)
-        self.label = label
-        self.stream = stream or sys.stderr
-        self.width = width
-        self.start = time.perf_counter()
-        self.tty = self.stream.isatty()
-        self._last = -1
-
-    def update(self, done: int) -> None:
-        percent = int(100 * done / self.total)
-        if not self.tty and percent // 10 == self._last // 10 and done < self.total:
-            return  # in a log, one line per 10%
-        if percent == self._last and done < self.total:
-            return
-        self._last = percent
-        filled = int(self.width * done / self.total)
-        elapsed = time.perf_counter() - self.start
-        eta = elapsed / done * (self.total - done) if done else 0.0
-        line = (f"{self.label} [{'#' * filled}{'.' * (self.width - filled)}] {done}/{self.total}"
-                f" {elapsed:5.1f}s, {eta:4.1f}s left")
-        self.stream.write(("\r" + line) if self.tty else (line + "\n"))
-        if self.tty and done >= self.total:
-            self.stream.write("\n")
-        self.stream.flush()
-
-
 def run(args) -> int:
     import numpy as np
     from PIL import Image
+    from tqdm import tqdm
 
     from characters import ImagePuppet, Motion
     from mop.export import open_writer
@@ -162,10 +133,12 @@ def run(args) -> int:
     renderer = ImageRenderer(puppet.image, puppet.vertices, puppet.triangles,
                              size=(width, height), background=args.background or "transparent")
     frame = np.empty((height, width, 4), np.uint8)
-    progress = Progress(frame_count, f"rendering {args.out.name}")
     simulate_time = render_time = 0.0
+    # on a terminal the bar is redrawn in place; in a log, a line every 5 s
     with open_writer(args.out, fps=args.fps, size=(width, height),
-                     background=args.background) as writer:
+                     background=args.background) as writer, \
+            tqdm(total=frame_count, desc=f"rendering {args.out.name}", unit="frame",
+                 file=sys.stderr, mininterval=0.1 if sys.stderr.isatty() else 5.0) as progress:
         puppet.reset()
         for index in range(frame_count):
             tick = time.perf_counter()
@@ -180,7 +153,7 @@ def run(args) -> int:
             writer.write(frame)
             simulate_time += tock - tick
             render_time += time.perf_counter() - tock
-            progress.update(index + 1)
+            progress.update(1)
     print(f"wrote {args.out}: {frame_count} frames {width}x{height} at {args.fps:g} fps "
           f"(simulation {1e3 * simulate_time / frame_count:.2f} ms/frame, render+encode "
           f"{1e3 * render_time / frame_count:.2f} ms/frame)")

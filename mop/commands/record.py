@@ -177,32 +177,13 @@ def _load_motion(spec: str, store):
                             f"{store.path}")
 
 
-class _Progress:
-    """One terminal line, redrawn in place on a terminal, a line per second otherwise."""
-
-    def __init__(self, stream=None):
-        self.stream = stream if stream is not None else sys.stdout
-        self.tty = self.stream.isatty()
-        self.last = -1.0
-
-    def show(self, text: str, *, now: float, force: bool = False) -> None:
-        if self.tty:
-            self.stream.write("\r" + text.ljust(78))
-            self.stream.flush()
-        elif force or now - self.last >= 1.0:
-            self.stream.write(text + "\n")
-            self.stream.flush()
-            self.last = now
-
-    def done(self) -> None:
-        if self.tty:
-            self.stream.write("\n")
-            self.stream.flush()
-
-
-def _bar(fraction: float, width: int = 30) -> str:
-    filled = int(round(max(0.0, min(1.0, fraction)) * width))
-    return "#" * filled + "." * (width - filled)
+def _progress(action: str, duration: float):
+    """A bar over the take's seconds, with the frame count and the source's status after it:
+    redrawn in place on a terminal, a line per second in a log."""
+    from tqdm import tqdm
+    return tqdm(total=duration, desc=f"  {action}", file=sys.stdout,
+                bar_format="{desc} [{bar:30}] {n:5.2f} / {total:.2f} s  {postfix}",
+                mininterval=0.1 if sys.stdout.isatty() else 1.0)
 
 
 def run(args) -> int:
@@ -240,7 +221,6 @@ def _record(args) -> int:
               f"channels) - play it beside you while recording")
 
     source = open_source(args.source)
-    progress = _Progress()
     recorder = None
     try:
         clock = source.clock
@@ -274,22 +254,21 @@ def _record(args) -> int:
                                 extra={"preview": str(preview) if preview else None})
         print(f"  GO - recording {recorder.name} for {duration:.2f} s", flush=True)
         end = start + duration
-        while (now := clock.now()) < end:
-            frame = source.read(timeout=min(0.05, max(end - now, 0.001)))
-            if frame is not None and start <= frame.t <= end:
-                recorder.append_frame(frame, channels=source.channels)
-            now = clock.now()
-            elapsed = min(now - start, duration)
-            progress.show(f"  {args.action} [{_bar(elapsed / duration)}] {elapsed:5.2f} / "
-                          f"{duration:.2f} s  frames {recorder.frames}  "
-                          f"{source.status.value}", now=now)
-        # frames that arrived by the end but were still queued
-        while (frame := source.read(timeout=0)) is not None:
-            if start <= frame.t <= end:
-                recorder.append_frame(frame, channels=source.channels)
-        progress.show(f"  {args.action} [{_bar(1.0)}] {duration:5.2f} / {duration:.2f} s  "
-                      f"frames {recorder.frames}", now=clock.now(), force=True)
-        progress.done()
+        with _progress(args.action, duration) as progress:
+            while (now := clock.now()) < end:
+                frame = source.read(timeout=min(0.05, max(end - now, 0.001)))
+                if frame is not None and start <= frame.t <= end:
+                    recorder.append_frame(frame, channels=source.channels)
+                elapsed = min(clock.now() - start, duration)
+                progress.set_postfix_str(f"frames {recorder.frames}  {source.status.value}",
+                                         refresh=False)
+                progress.update(elapsed - progress.n)
+            # frames that arrived by the end but were still queued
+            while (frame := source.read(timeout=0)) is not None:
+                if start <= frame.t <= end:
+                    recorder.append_frame(frame, channels=source.channels)
+            progress.set_postfix_str(f"frames {recorder.frames}", refresh=False)
+            progress.update(duration - progress.n)
         stats = source.stats
         # time alignment (MOP 3.1.3): the captured interval [0, duration] of the recorder's
         # clock is what pairs with the whole motion; Take.aligned() normalises it

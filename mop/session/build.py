@@ -141,10 +141,7 @@ def performer_templates(config: SessionConfig, performer: PerformerConfig,
 
 
 def build_bank(templates: Mapping[str, np.ndarray], performer: PerformerConfig):
-    try:
-        from followers import FollowerBank
-    except ImportError:  # the package may not export it yet
-        from followers.bank import FollowerBank
+    from followers import FollowerBank
     options = {}
     if performer.sigma is not None:
         options["sigma"] = performer.sigma

@@ -269,20 +269,23 @@ def bench_trackers(repeats: int) -> None:
 
 
 def bench_hid_parse(repeats: int) -> None:
-    from capture.hid.parse import parse_into, parse_report_reference
+    from capture.hid.parse import parse_into, parse_report_reference, parse_status_reference
     from capture.hid.profile import load_profile
-    section("HID report parsing (DualShock 4 USB report, 29 channels)")
     profile = load_profile("dualshock4")
-    report = bytes([1]) + bytes(range(1, 64))
+    section(f"HID report parsing (DualShock 4 USB report, {len(profile.channels)} channels and "
+            f"{len(profile.status)} status values)")
+    report = bytes([1]) + bytes(range(1, 31)) + bytes(33)   # byte 31 = 0: a controller
     state = np.full(len(profile.channels), np.nan)
-    parse_into(profile, report, state)
+    status = np.full(len(profile.status), np.nan)
+    parse_into(profile, report, state, status)
     fast, slow = [], []
     for _ in range(repeats):
         start = time.perf_counter()
-        parse_into(profile, report, state)
+        parse_into(profile, report, state, status)
         fast.append(time.perf_counter() - start)
         start = time.perf_counter()
         parse_report_reference(profile, report)
+        parse_status_reference(profile, report)
         slow.append(time.perf_counter() - start)
     print(f"  numba kernel      {1e6 * np.median(fast):7.2f} us  p90 "
           f"{1e6 * np.percentile(fast, 90):7.2f} us")

@@ -8,13 +8,16 @@ log = logging.getLogger(__name__)
 
 
 def list_devices(*, cameras: bool = True) -> dict:
-    """{"hid": [...], "hid_error": str, "profiles": {name: title}, "cameras": [...],
-    "camera_error": str, "osc": {"host", "port", "address", "spec"}}."""
-    result: dict = {"hid": [], "hid_error": "", "profiles": {}, "cameras": [],
-                    "camera_error": ""}
+    """{"hid": [...], "hid_error": str, "profiles": {name: title}, "skipped_profiles":
+    {path: why}, "cameras": [...], "camera_error": str, "osc": {"host", "port", "address",
+    "spec"}}. Each HID device with a profile of its own carries "status": battery and
+    connection as it reports them (`capture.hid.status.DeviceStatus.as_dict()`)."""
+    result: dict = {"hid": [], "hid_error": "", "profiles": {}, "skipped_profiles": {},
+                    "cameras": [], "camera_error": ""}
     try:
-        from .hid.profile import available_profiles
+        from .hid.profile import available_profiles, skipped_profiles
         result["profiles"] = {name: p.title for name, p in sorted(available_profiles().items())}
+        result["skipped_profiles"] = {str(path): why for path, why in skipped_profiles().items()}
         from .hid.source import list_hid_devices
         result["hid"] = list_hid_devices()
     except ImportError as error:

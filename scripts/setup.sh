@@ -13,6 +13,7 @@ apt_packages=(python3-venv python3-dev build-essential
               libegl1 libgl1 libegl-mesa0 libgl1-mesa-dri libgles2)   # pyrender offscreen via EGL
 if [ "$want_tests" = 1 ]; then
     apt_packages+=(umockdev libumockdev-dev    # a HID device simulated in user space for end-to-end tests
+                   libevdev2                   # loaded by hid-tools (the kernel's emulated gamepads)
                    chromium chromium-driver)   # the live preview page, tested in a real browser
 fi
 

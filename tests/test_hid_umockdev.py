@@ -5,8 +5,12 @@ descriptor ioctls umockdev does not, and can "unplug" the node for the reconnect
 
 Each test runs a child Python under `umockdev-run` that opens `hid:PROFILE` exactly as a user
 would (enumeration by vendor/product id, open, read) and prints the frames as JSON; the test
-compares them with the pure parser applied to the same bytes."""
+compares them with the pure parser applied to the same bytes. The DualShock 4 runs use the
+kernel selftests' emulated pad (hid-tools): its real report descriptor, its reports and the
+calibration feature report the shim serves, so the whole path (calibration read on open,
+Bluetooth CRC, status) is checked against values that did not come from mop."""
 import json
+import math
 import os
 import shutil
 import subprocess
@@ -17,8 +21,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from capture.hid.calibration import parse_calibration, requests
 from capture.hid.parse import MalformedReport, parse_into
 from capture.hid.profile import load_profile
+from capture.hid.status import Connection
+from hid_emulated_pads import emulated, feature_report
 
 pytestmark = pytest.mark.device
 
@@ -33,6 +40,8 @@ DESCRIPTORS = {
     "dualshock4": "05010905a101850106 00ff09201500 26ff00750895 3f8102c0".replace(" ", ""),
     # Vendor page 0xff00, report 1: 17 bytes
     "p5": "0600ff0901a10185011500 26ff007508951181 02c0".replace(" ", ""),
+    # Generic Desktop / Mouse, report 2: 3 bytes (the Universal Receiver's mouse interface)
+    "mouse": "05010902a101850209300931150026ff00750895028102c0",
 }
 
 
@@ -55,11 +64,11 @@ def shim(tmp_path_factory) -> Path:
 
 
 def device_description(vendor: int, product: int, product_name: str, manufacturer: str,
-                       descriptor: str) -> str:
-    """A umockdev device description: USB device, interface, HID device, hidraw node."""
+                       descriptor: str, *, bus: int = 0x03, interfaces: int = 1) -> str:
+    """A umockdev device description: USB device, then per interface k an interface, a HID
+    device (bus 0x03 USB, 0x05 Bluetooth) and the node /dev/hidrawK."""
     usb = "/devices/pci0000:00/0000:00:14.0/usb1/1-2"
-    hid = f"{usb}/1-2:1.0/0003:{vendor:04X}:{product:04X}.0001"
-    return textwrap.dedent(f"""\
+    out = [textwrap.dedent(f"""\
         P: {usb}
         N: bus/usb/001/004
         E: DEVNAME=/dev/bus/usb/001/004
@@ -71,31 +80,36 @@ def device_description(vendor: int, product: int, product_name: str, manufacture
         A: bcdDevice=0100
         A: manufacturer={manufacturer}
         A: product={product_name}
+        """)]
+    descriptors = descriptor if isinstance(descriptor, list) else [descriptor] * interfaces
+    for k, rdesc in enumerate(descriptors):
+        hid = f"{usb}/1-2:1.{k}/{bus:04X}:{vendor:04X}:{product:04X}.000{k + 1}"
+        out.append(textwrap.dedent(f"""\
+            P: {usb}/1-2:1.{k}
+            E: DEVTYPE=usb_interface
+            E: DRIVER=usbhid
+            E: SUBSYSTEM=usb
+            A: bInterfaceNumber=0{k}
 
-        P: {usb}/1-2:1.0
-        E: DEVTYPE=usb_interface
-        E: DRIVER=usbhid
-        E: SUBSYSTEM=usb
-        A: bInterfaceNumber=00
+            P: {hid}
+            E: DRIVER=hid-generic
+            E: HID_ID={bus:04X}:{vendor:08X}:{product:08X}
+            E: HID_NAME={manufacturer} {product_name}
+            E: HID_PHYS=usb-0000:00:14.0-2/input{k}
+            E: HID_UNIQ=
+            E: MODALIAS=hid:b{bus:04X}g0001v{vendor:08X}p{product:08X}
+            E: SUBSYSTEM=hid
+            H: report_descriptor={rdesc.upper()}
 
-        P: {hid}
-        E: DRIVER=hid-generic
-        E: HID_ID=0003:{vendor:08X}:{product:08X}
-        E: HID_NAME={manufacturer} {product_name}
-        E: HID_PHYS=usb-0000:00:14.0-2/input0
-        E: HID_UNIQ=
-        E: MODALIAS=hid:b0003g0001v{vendor:08X}p{product:08X}
-        E: SUBSYSTEM=hid
-        H: report_descriptor={descriptor.upper()}
-
-        P: {hid}/hidraw/hidraw0
-        N: hidraw0
-        L: device=../../../0003:{vendor:04X}:{product:04X}.0001
-        E: DEVNAME=/dev/hidraw0
-        E: MAJOR=241
-        E: MINOR=0
-        E: SUBSYSTEM=hidraw
-        """)
+            P: {hid}/hidraw/hidraw{k}
+            N: hidraw{k}
+            L: device=../../../{bus:04X}:{vendor:04X}:{product:04X}.000{k + 1}
+            E: DEVNAME=/dev/hidraw{k}
+            E: MAJOR=241
+            E: MINOR={k}
+            E: SUBSYSTEM=hidraw
+            """))
+    return "\n".join(out)
 
 
 def script_line(delay_ms: int, data: bytes) -> bytes:
@@ -149,8 +163,9 @@ CHILD = textwrap.dedent("""\
         statuses.append(source.status.value)
         collect(produced + 3, 5)
     stats, info = source.stats, source.describe()
+    device_status = source.device_status().as_dict()
     source.close()
-    print(json.dumps({"channels": list(source.channels),
+    print(json.dumps({"channels": list(source.channels), "device_status": device_status,
                       "values": [f.values.tolist() for f in frames],
                       "seq": [f.seq for f in frames], "t": [f.t for f in frames],
                       "statuses": statuses, "malformed": stats.malformed,
@@ -160,35 +175,47 @@ CHILD = textwrap.dedent("""\
 
 
 def run_simulated(tmp_path, shim, *, spec, vendor, product, name, manufacturer, descriptor,
-                  reports, expect, delay_ms=10, mode="read"):
+                  reports, expect, delay_ms=10, mode="read", bus=0x03, features=None,
+                  node=0, interfaces=1, command=None, env=None):
+    """Run the child under umockdev-run with the device described and `reports` scripted on
+    /dev/hidraw{node}; return the JSON it prints last (with `command`, the argv to run after
+    the interpreter instead: the finished process). features: {report id: bytes} the shim
+    serves as feature reports."""
     (tmp_path / "device.umockdev").write_text(
-        device_description(vendor, product, name, manufacturer, descriptor))
+        device_description(vendor, product, name, manufacturer, descriptor, bus=bus,
+                           interfaces=interfaces))
     (tmp_path / "reports.script").write_bytes(
         b"\n".join(script_line(delay_ms, r) for r in reports) + b"\n")
     (tmp_path / "child.py").write_text(CHILD)
-    env = dict(os.environ, MOP_HID_DESCRIPTOR=descriptor, MOP_HID_FRAMED="1",
+    opened = descriptor[node] if isinstance(descriptor, list) else descriptor
+    env = dict(os.environ, **(env or {}), MOP_HID_DESCRIPTOR=opened, MOP_HID_FRAMED="1",
                MOP_HID_UNPLUG=str(tmp_path / "unplug"),
                PYTHONPATH=os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")])))
-    command = ["umockdev-run", "-d", str(tmp_path / "device.umockdev"),
-               "-s", f"/dev/hidraw0={tmp_path / 'reports.script'}", "--", "sh", "-c",
-               f'LD_PRELOAD="{shim}:$LD_PRELOAD" exec "{sys.executable}" '
-               f'"{tmp_path / "child.py"}" "$0" "$1" "$2"', spec, str(expect), mode]
-    done = subprocess.run(command, env=env, capture_output=True, text=True, timeout=60)
+    for report_id, data in (features or {}).items():
+        env[f"MOP_HID_FEATURE_{report_id:02x}"] = data.hex()
+    argv = command or [str(tmp_path / "child.py"), spec, str(expect), mode]
+    run = ["umockdev-run", "-d", str(tmp_path / "device.umockdev"),
+               "-s", f"/dev/hidraw{node}={tmp_path / 'reports.script'}", "--", "sh", "-c",
+               f'LD_PRELOAD="{shim}:$LD_PRELOAD" exec "{sys.executable}" "$@"', "sh", *argv]
+    done = subprocess.run(run, env=env, capture_output=True, text=True, timeout=60)
     assert done.returncode == 0, done.stderr[-3000:]
+    if command:
+        return done
     return json.loads(done.stdout.strip().splitlines()[-1])
 
 
 def expected_frames(profile, reports):
-    """What the source must produce: one frame per valid report, channels of other reports
-    held, computed with the pure parser in this process."""
+    """What the source must produce: one frame per valid report with input, channels of other
+    reports held, computed with the pure parser in this process."""
     state = np.full(len(profile.channels), np.nan)
     frames = []
     for report in reports:
         try:
-            parse_into(profile, report, state)
+            parsed = parse_into(profile, report, state)
         except MalformedReport:
             continue
-        frames.append(state.copy())
+        if parsed.carried_input:
+            frames.append(state.copy())
     return np.array(frames)
 
 
@@ -213,7 +240,7 @@ def test_spacemouse_through_hidraw(tmp_path, shim, rng):
     want = expected_frames(profile, reports)
     got = np.array(out["values"], dtype=float)
     assert out["channels"] == list(profile.channels)
-    assert got.shape == want.shape == (12, 8)
+    assert got.shape == want.shape == (12, 38)
     np.testing.assert_array_equal(got, want)
     assert out["seq"] == list(range(12))
     assert np.all(np.diff(out["t"]) >= 0)
@@ -229,6 +256,7 @@ def test_dualshock4_and_p5_glove_through_hidraw(tmp_path, shim, rng):
     for _ in range(6):
         report = bytearray(rng.integers(0, 256, 64, dtype=np.uint8).tobytes())
         report[0] = 0x01
+        report[31] &= ~0x04             # set, it would say "no controller on the adaptor"
         reports.append(bytes(report))
     (tmp_path / "ds4").mkdir()
     out = run_simulated(tmp_path / "ds4", shim,
@@ -276,3 +304,103 @@ def test_unplugged_device_is_reported_and_reconnected(tmp_path, shim):
     assert np.all(np.diff(np.round(tx)) >= 1)
     np.testing.assert_allclose(got[:, 1], -got[:, 0])
     assert out["malformed"] == 0
+
+
+def emulated_ds4_run(rng, class_name, count):
+    """Reports, report descriptor (hex), calibration feature report and the values put in,
+    from the kernel selftests' emulated DualShock 4."""
+    bluetooth = "Bluetooth" in class_name
+    with emulated(class_name) as device:
+        request = requests("dualshock4", Connection.BLUETOOTH if bluetooth else Connection.USB)[0]
+        feature = feature_report(device, request.report_id)
+        reports, events = [], []
+        for _ in range(count):
+            event = dict(left=tuple(int(v) for v in rng.integers(0, 256, 2)),
+                         right=tuple(int(v) for v in rng.integers(0, 256, 2)),
+                         gyro=tuple(int(v) for v in rng.integers(-1_000_000, 1_000_001, 3)))
+            device.battery.capacity = 55
+            device.battery.cable_connected = False      # over USB the cable is in anyway
+            reports.append(bytes(device.create_report(**event)))
+            events.append(event)
+        return reports, bytes(device.rdesc).hex(), {request.report_id: feature}, events
+
+
+@pytest.mark.parametrize("class_name, bus", [("PS4ControllerUSB", 0x03),
+                                             ("PS4ControllerBluetooth", 0x05)])
+def test_dualshock4_emulated_pad_with_its_calibration(tmp_path, shim, rng, class_name, bus):
+    """The kernel selftests' DualShock 4 over USB and Bluetooth: its descriptor, its reports
+    (Bluetooth with their CRC32), and its calibration served as the feature report the source
+    reads on open. The gyro comes back in the units hid-tools was given (one raw count of
+    truncation), which the profile's nominal scale alone would miss by 0.1-0.7 %."""
+    reports, rdesc, features, events = emulated_ds4_run(rng, class_name, 8)
+    out = run_simulated(tmp_path, shim, spec="hid:dualshock4", vendor=0x054C, product=0x05C4,
+                        name="Wireless Controller", manufacturer="Sony Computer Entertainment",
+                        descriptor=rdesc, reports=reports, expect=8, bus=bus,
+                        features=features)
+    profile = load_profile("dualshock4")
+    (report_id, feature), = features.items()
+    request = requests("dualshock4", Connection.BLUETOOTH if bus == 5 else Connection.USB)[0]
+    calibrated = profile.with_affine(parse_calibration(feature, request).affine())
+    got = np.array(out["values"], dtype=float)
+    np.testing.assert_array_equal(got, expected_frames(calibrated, reports))
+    v = [dict(zip(out["channels"], row)) for row in got]
+    for frame, event in zip(v, events):
+        assert [round(frame[c] * 127.5 + 127.5, 6) for c in ("lx", "ly", "rx", "ry")] == \
+            list(event["left"] + event["right"])
+        for axis, want in zip("xyz", event["gyro"]):
+            assert abs(frame[f"gyro_{axis}"] * 1024 * 180 / math.pi - want) <= 63
+    status = out["device_status"]
+    assert status["connection"] == ("bluetooth" if bus == 5 else "usb")
+    assert status["calibration"] == "device"
+    # 55 % written as level 5: the middle of 50-59 %; over USB the cable is in, charging
+    assert status["battery"] == pytest.approx(0.55)
+    assert status["battery_state"] == ("charging" if bus == 3 else "discharging")
+    assert out["malformed"] == 0
+
+
+def test_dualshock4_usb_adaptor_without_controller_gives_no_frames(tmp_path, shim, rng):
+    """The USB Wireless Adaptor streams near-zero reports while no controller is connected:
+    no frame (no phantom stick at -1), no battery, the reason in the status; frames start when
+    a controller is there."""
+    reports, rdesc, _, _ = emulated_ds4_run(rng, "PS4ControllerUSB", 6)
+    absent = bytearray(64)
+    absent[0], absent[31] = 0x01, 0x04
+    script = [bytes(absent)] * 5 + reports
+    out = run_simulated(tmp_path, shim, spec="hid:dualshock4", vendor=0x054C, product=0x0BA0,
+                        name="DUALSHOCK 4 USB Wireless Adaptor",
+                        manufacturer="Sony Interactive Entertainment", descriptor=rdesc,
+                        reports=script, expect=6)
+    got = np.array(out["values"], dtype=float)
+    assert got.shape[0] == 6
+    np.testing.assert_array_equal(got, expected_frames(load_profile("dualshock4"), reports))
+    assert out["problems"].get("no controller connected to the USB Wireless Adaptor") == 1
+    assert out["malformed"] == 0 and out["device_status"]["no_input"] == ""
+    assert out["device_status"]["calibration"] == "nominal"     # this adaptor serves none
+
+
+def test_spacemouse_receiver_opens_its_multi_axis_interface(tmp_path, shim, rng):
+    """The Universal Receiver enumerates its mouse interface first; the source must open the
+    multi-axis one (the only one with reports here, so a wrong choice reads nothing)."""
+    reports = [b"\x01" + rng.integers(-350, 351, 6).astype("<i2").tobytes() for _ in range(5)]
+    out = run_simulated(tmp_path, shim, spec="hid:spacemouse", vendor=0x256F, product=0xC652,
+                        name="Universal Receiver", manufacturer="3Dconnexion",
+                        descriptor=[DESCRIPTORS["mouse"], DESCRIPTORS["spacemouse"]],
+                        interfaces=2, node=1, reports=reports, expect=5)
+    np.testing.assert_array_equal(np.array(out["values"], dtype=float),
+                                  expected_frames(load_profile("spacemouse"), reports))
+    assert out["device"]["path"].endswith("hidraw1")
+
+
+def test_mop_devices_shows_battery_and_connection(tmp_path, shim, rng):
+    reports, rdesc, _, _ = emulated_ds4_run(rng, "PS4ControllerBluetooth", 40)
+    profiles = tmp_path / "profiles"
+    profiles.mkdir()
+    (profiles / "broken.toml").write_text("name = \n")
+    done = run_simulated(tmp_path, shim, spec="", vendor=0x054C, product=0x05C4,
+                         name="Wireless Controller", manufacturer="Sony", descriptor=rdesc,
+                         reports=reports, expect=0, bus=0x05,
+                         command=["-m", "mop.cli", "devices", "--no-cameras"],
+                         env={"MOP_HID_PROFILES": str(profiles)})
+    text = done.stdout
+    assert "Bluetooth, battery 55 % (discharging)" in text, text
+    assert "skipped" in text and "broken.toml" in text, text

@@ -3,18 +3,24 @@
 `HidSource(profile)` finds a device the profile fits (or opens the one given by path or
 vendor:product), reads its input reports on a thread, parses each with the profile (a pure
 function of the bytes) and holds the last value of channels carried by other reports. When the
-device goes away the source reports DISCONNECTED and opens it again when it is back.
+device goes away the source reports DISCONNECTED and opens it again when it is back. On open
+it reads the IMU calibration the device keeps (profiles that name one), and while reading it
+keeps what the device says about itself: `device_status()` (battery, cable, connection, IMU
+clock, no controller on a receiver).
 """
 from __future__ import annotations
 
 import logging
 import sys
+import time
 
 import numpy as np
 
 from ..clock import MonotonicClock
 from ..source import ThreadedSource
 from .profile import Profile, available_profiles, load_profile
+from .status import (Connection, DeviceStatus, SensorClock, battery_from_status, connection_of,
+                     sensor_clock_period)
 
 log = logging.getLogger(__name__)
 
@@ -43,9 +49,17 @@ def enumerate_devices() -> list[dict]:
         return []
 
 
-def list_hid_devices() -> list[dict]:
+def _fits(profile: Profile, device: dict) -> bool:
+    return profile.matches(device.get("vendor_id", -1), device.get("product_id", -1),
+                           usage_page=device.get("usage_page"), usage=device.get("usage"))
+
+
+def list_hid_devices(*, status: bool = True, timeout: float = 0.3) -> list[dict]:
     """HID devices with the profiles that fit them: each dict from `enumerate_devices` plus
-    "profiles": [profile names] (the generic profile fits every device). One entry per path."""
+    "profiles": [profile names] (the generic profile fits every device) and, with `status`,
+    "status": what a device with a profile of its own says about itself in its first reports
+    (`DeviceStatus.as_dict()`, up to `timeout` s each; {"error": ...} when it cannot be
+    read). One entry per path."""
     profiles = available_profiles()
     seen, out = set(), []
     for device in enumerate_devices():
@@ -53,12 +67,50 @@ def list_hid_devices() -> list[dict]:
         if path in seen:
             continue
         seen.add(path)
-        names = [name for name, p in profiles.items()
-                 if p.matches(device.get("vendor_id", -1), device.get("product_id", -1))]
+        names = [name for name, p in profiles.items() if not p.raw and _fits(p, device)]
         entry = dict(device)
         entry["profiles"] = names + (["generic"] if "generic" in profiles else [])
+        if status and names:
+            try:
+                entry["status"] = probe_status(path, profiles[names[0]],
+                                               timeout=timeout).as_dict()
+            except OSError as error:
+                entry["status"] = {"error": str(error)}
         out.append(entry)
     return out
+
+
+def probe_status(path: bytes | str, profile: Profile, *, timeout: float = 0.3) -> DeviceStatus:
+    """Open the device at `path`, read reports for up to `timeout` s and return what they say
+    about the device (no calibration is read). Raises OSError when it cannot be opened."""
+    path = path.encode() if isinstance(path, str) else path
+    from .parse import MalformedReport, parse_into
+    backend = hid_backend()
+    device = backend.device()
+    try:
+        device.open_path(path)
+    except (OSError, IOError) as error:
+        raise OSError(f"cannot open {path.decode(errors='replace')}: {error}") from None
+    state = np.full(len(profile.channels), np.nan)
+    values = np.full(len(profile.status), np.nan)
+    no_input = ""
+    try:
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            data = device.read(profile.read_size, max(1, int(1000 * (deadline - time.monotonic()))))
+            if not data:
+                continue
+            try:
+                parsed = parse_into(profile, bytes(data), state, values)
+            except MalformedReport:
+                continue
+            no_input = parsed.skipped
+            if not parsed.skipped and (np.isfinite(values).any() or not profile.status):
+                break
+    finally:
+        device.close()
+    battery, state_, cable = battery_from_status(profile, values)
+    return DeviceStatus(connection_of(path), battery, state_, cable, None, "", no_input)
 
 
 def parse_selector(selector: str) -> dict:
@@ -108,6 +160,17 @@ class HidSource(ThreadedSource):
                              f"hid:{self.profile.name}@/dev/hidraw0 or "
                              f"hid:{self.profile.name}@046d:c626")
         self._state = np.full(len(self.channels), np.nan)
+        self._status = np.full(len(self.profile.status), np.nan)
+        period = sensor_clock_period(self.profile)
+        self._clock_period = period
+        self._sensor_clock = SensorClock(period) if period else None
+        self._sensor_time: float | None = None
+        self._status_clock_index = (self.profile.status.index("sensor_time")
+                                    if period else -1)
+        self._no_input = ""
+        self._connection = Connection.UNKNOWN
+        self._calibration = ""
+        self._device_profile = self.profile     # with the open device's own calibration
         self._tail = b""
         self._device = None
         self.device_info: dict = {}
@@ -116,33 +179,41 @@ class HidSource(ThreadedSource):
         from .parse import parse_into, split_reports
         self._parse_into, self._split = parse_into, split_reports
         warm = np.full(len(self.channels), np.nan)
+        warm_status = np.full(len(self.profile.status), np.nan)
         for report in self.profile.reports[:1]:
             dummy = bytearray(report.length)
             if report.report_id is not None:
                 dummy[0] = report.report_id
-            parse_into(self.profile, bytes(dummy), warm)
+            parse_into(self.profile, bytes(dummy), warm, warm_status)
         self._start(wait=wait)
 
     def describe(self) -> dict:
         info = super().describe()
         info.update(profile=self.profile.name, units=list(self.profile.units),
                     device={k: (v.decode() if isinstance(v, bytes) else v)
-                            for k, v in self.device_info.items()})
+                            for k, v in self.device_info.items()},
+                    device_status=self.device_status().as_dict())
         return info
+
+    def device_status(self) -> DeviceStatus:
+        """What the device said about itself in its latest reports (see `DeviceStatus`)."""
+        battery, state, cable = battery_from_status(self.profile, self._status.copy())
+        return DeviceStatus(self._connection, battery, state, cable, self._sensor_time,
+                            self._calibration, self._no_input)
 
     def _find(self) -> tuple[bytes, dict]:
         if self._path:
             return self._path, {"path": self._path}
         devices = enumerate_devices()
-        for device in devices:
-            vendor, product = device.get("vendor_id"), device.get("product_id")
-            if self._vendor_id is not None:
-                fits = vendor == self._vendor_id and (self._product_id is None
-                                                      or product == self._product_id)
-            else:
-                fits = self.profile.matches(vendor, product)
-            if fits:
-                return device["path"], device
+        if self._vendor_id is not None:
+            chosen = [d for d in devices if d.get("vendor_id") == self._vendor_id and (
+                self._product_id is None or d.get("product_id") == self._product_id)]
+            # of a receiver's several interfaces, the one the profile describes
+            chosen.sort(key=lambda d: not _fits(self.profile, d))
+        else:
+            chosen = [d for d in devices if _fits(self.profile, d)]
+        if chosen:
+            return chosen[0]["path"], chosen[0]
         wanted = (f"{self._vendor_id:04x}:{(self._product_id or 0):04x}"
                   if self._vendor_id is not None else
                   ", ".join(f"{d.vendor_id:04x}:{d.product_id:04x}"
@@ -166,7 +237,30 @@ class HidSource(ThreadedSource):
         self.device_info = info
         # values from before a reconnection are stale
         self._state[:] = np.nan
+        self._status[:] = np.nan
+        self._sensor_clock = SensorClock(self._clock_period) if self._clock_period else None
+        self._sensor_time = None
+        self._no_input = ""
         self._tail = b""
+        self._connection = connection_of(path)
+        self._device_profile = self._calibrated(device)
+
+    def _calibrated(self, device) -> Profile:
+        """The profile with the IMU calibration the device reports, or as it is (nominal
+        scales) when the device gives none."""
+        if not self.profile.calibration:
+            self._calibration = ""
+            return self.profile
+        from .calibration import read_calibration
+        calibration, problem = read_calibration(device, self.profile.calibration,
+                                                self._connection)
+        if calibration is None or not calibration.affine():
+            self._calibration = "nominal"
+            log.info("%s: no IMU calibration from the device (%s); nominal scales",
+                     self.spec, problem or "no usable axis")
+            return self.profile
+        self._calibration = "device" if calibration.complete else "device (some axes nominal)"
+        return self.profile.with_affine(calibration.affine())
 
     def _pump(self, timeout: float) -> None:
         data = self._device.read(self.profile.read_size, max(1, int(timeout * 1000)))
@@ -179,11 +273,22 @@ class HidSource(ThreadedSource):
         reports, self._tail = self._split(self.profile, data, allow_tail=full)
         for report in reports:
             try:
-                self._parse_into(self.profile, report, self._state)
+                parsed = self._parse_into(self._device_profile, report, self._state,
+                                          self._status)
             except ValueError as error:     # MalformedReport: count it, keep reading
                 self._problem(str(error), malformed=True)
                 continue
-            self._emit(t, self._state.copy())
+            if parsed.skipped:
+                if parsed.skipped != self._no_input:   # counted once per change, not per report
+                    self._problem(parsed.skipped)
+                self._no_input = parsed.skipped
+                continue
+            self._no_input = ""
+            if self._sensor_clock is not None:
+                self._sensor_time = self._sensor_clock.update(
+                    self._status[self._status_clock_index])
+            if parsed.carried_input:
+                self._emit(t, self._state.copy())
 
     def _close_device(self) -> None:
         device, self._device = self._device, None

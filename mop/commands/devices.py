@@ -21,6 +21,19 @@ def _text(value) -> str:
     return value.decode(errors="replace") if isinstance(value, bytes) else str(value or "")
 
 
+def _hid_status(status: dict) -> str:
+    """One line from a HID device's status: connection, battery, cable."""
+    if "error" in status:
+        return f"status not read: {status['error']}"
+    from capture.hid.status import BatteryState, Connection, DeviceStatus
+    known = DeviceStatus(
+        Connection(status.get("connection") or ""), status.get("battery"),
+        BatteryState(status["battery_state"]) if status.get("battery_state") else None,
+        status.get("cable"), None, status.get("calibration") or "",
+        status.get("no_input") or "")
+    return known.text() or "no battery or connection state reported"
+
+
 def run(args) -> int:
     from capture.devices import list_devices
 
@@ -42,9 +55,13 @@ def run(args) -> int:
         print(f"  {path:<14} {device.get('vendor_id', 0):04x}:{device.get('product_id', 0):04x}"
               f"  {name}")
         print(f"  {'':<14} profiles: {', '.join(profiles)};  open with hid:{best}@{path}")
+        if "status" in device:
+            print(f"  {'':<14} {_hid_status(device['status'])}")
     print("HID profiles:")
     for name, title in found["profiles"].items():
         print(f"  {name:<12} {title}")
+    for path, why in found.get("skipped_profiles", {}).items():
+        print(f"  skipped {path}: {why}")
     print("Cameras:")
     if found["camera_error"]:
         print(f"  unavailable: {found['camera_error']}")

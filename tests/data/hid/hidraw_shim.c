@@ -12,6 +12,9 @@
  *  - Unplugging: while the file named by MOP_HID_UNPLUG exists, a hidraw node behaves as a
  *    removed device does: poll() reports POLLHUP|POLLERR, read() fails with ENODEV and open()
  *    fails with ENOENT. Removing the file "plugs it back in".
+ *  - Feature reports: HIDIOCGFEATURE for report id NN returns the bytes (hex, report id
+ *    first) in MOP_HID_FEATURE_NN (NN two lower-case hex digits), or fails with EPIPE, as a
+ *    device that has no such report does.
  * Built by the test fixture: gcc -shared -fPIC -o hidraw_shim.so hidraw_shim.c -ldl
  */
 #define _GNU_SOURCE
@@ -41,16 +44,31 @@ static int hidraw_path(const char *path) {
     return path && strstr(path, "/dev/hidraw") != NULL;
 }
 
-static int descriptor(unsigned char *out, int max) {
-    const char *hex = getenv("MOP_HID_DESCRIPTOR");
+static int hex_bytes(const char *hex, unsigned char *out, int max) {
     int n = 0;
-    if (!hex) return -1;
     while (hex[0] && hex[1] && n < max) {
         unsigned value;
         if (sscanf(hex, "%2x", &value) != 1) return -1;
         out[n++] = (unsigned char)value;
         hex += 2;
     }
+    return n;
+}
+
+static int descriptor(unsigned char *out, int max) {
+    const char *hex = getenv("MOP_HID_DESCRIPTOR");
+    return hex ? hex_bytes(hex, out, max) : -1;
+}
+
+static int feature(unsigned char *buffer, size_t size) {
+    char name[32];
+    snprintf(name, sizeof name, "MOP_HID_FEATURE_%02x", buffer[0]);
+    const char *hex = getenv(name);
+    unsigned char bytes[4096];
+    int n = hex ? hex_bytes(hex, bytes, sizeof bytes) : -1;
+    if (n <= 0) { errno = EPIPE; return -1; }
+    if ((size_t)n > size) n = (int)size;
+    memcpy(buffer, bytes, n);
     return n;
 }
 
@@ -137,6 +155,10 @@ int ioctl(int fd, unsigned long request, ...) {
     void *arg = va_arg(ap, void *);
     va_end(ap);
     if (!next) next = dlsym(RTLD_NEXT, "ioctl");
+    if (_IOC_TYPE(request) == 'H' && _IOC_NR(request) == 0x07 && fd >= 0 && fd < MAX_FD
+            && is_hidraw[fd]) {                          /* HIDIOCGFEATURE(len) */
+        return feature(arg, _IOC_SIZE(request));
+    }
     if (request == HIDIOCGRDESCSIZE || request == HIDIOCGRDESC) {
         unsigned char bytes[HID_MAX_DESCRIPTOR_SIZE];
         int size = descriptor(bytes, sizeof bytes);

@@ -564,3 +564,40 @@ def test_one_bad_user_profile_is_skipped_with_a_warning_naming_it(tmp_path, monk
     assert load_profile("good").channels == ("knob",)
     with pytest.raises(ValueError, match=r"unknown HID profile 'broken'.*skipped .*broken.toml"):
         load_profile("broken")
+
+
+def test_damaged_profile_tables_raise_only_profile_errors(rng):
+    """Any key of a shipped profile replaced by a value of another type (or removed): the
+    reader says what is wrong (ProfileError), it never fails some other way."""
+    import copy
+    import tomllib
+    from capture.hid.profile import PROFILE_DIR
+    shipped = [tomllib.loads(p.read_text()) for p in sorted(PROFILE_DIR.glob("*.toml"))]
+    odd = [None, 0, -1, 1.5, float("nan"), float("inf"), "x", "", True, [], {}, [1, 2],
+           {"a": 1}, 10**30, [{}], [{"bit": 1}]]
+
+    def places(node, where=()):
+        yield where
+        items = node.items() if isinstance(node, dict) else (
+            enumerate(node) if isinstance(node, list) else ())
+        for key, child in items:
+            yield from places(child, where + (key,))
+
+    errors = 0
+    for _ in range(400):
+        table = copy.deepcopy(shipped[int(rng.integers(len(shipped)))])
+        where = [w for w in places(table) if w]
+        target = where[int(rng.integers(len(where)))]
+        parent = table
+        for key in target[:-1]:
+            parent = parent[key]
+        if isinstance(parent, dict) and rng.random() < 0.2:
+            del parent[target[-1]]
+        else:
+            parent[target[-1]] = copy.deepcopy(odd[int(rng.integers(len(odd)))])
+        try:
+            parse_profile(table, path="damaged.toml")
+        except ProfileError as error:
+            errors += 1
+            assert str(error).startswith("damaged.toml: ")
+    assert errors > 200

@@ -344,6 +344,8 @@ def _field(table: Mapping, path, where: str, length: int) -> Field:
         _fail(path, where, f"'channel' must be a non-empty string, got {channel!r}")
     where = f"{where} ({channel})"
     kind = table.get("type")
+    if not isinstance(kind, str):
+        _fail(path, where, f"'type' must be a string such as \"u8\" or \"ubits\", got {kind!r}")
     scale = _number(table, "scale", path, where, default=1.0)
     center = _number(table, "center", path, where, default=0.0)
     lookup = table.get("lookup", [])
@@ -472,6 +474,16 @@ def _optional_int(table, key, path, where, default=None):
     return _number(table, key, path, where, kind=int) if key in table else default
 
 
+def _id16(table, key, path, where, default=None, *, required=False):
+    """A 16-bit USB or HID id (vendor, product, usage page, usage); None when absent."""
+    if required and key not in table:
+        _fail(path, where, f"missing {key!r}")
+    value = _optional_int(table, key, path, where, default)
+    if value is not None and not 0 <= value <= 0xFFFF:
+        _fail(path, where, f"{key!r} must be 0..0xffff, got {value}")
+    return value
+
+
 def _raw_profile(data, name, title, rate, devices, path) -> Profile:
     length = _number(data, "length", path, "top level", default=64, kind=int)
     if not 1 <= length <= 4096:
@@ -482,6 +494,8 @@ def _raw_profile(data, name, title, rate, devices, path) -> Profile:
     report = Report("raw", None, length, fields, "raw report bytes",
                     arrays=_compile(fields, channels))
     read_size = _number(data, "read_size", path, "top level", default=length, kind=int)
+    if not 1 <= read_size <= 65536:
+        _fail(path, "top level", f"'read_size' must be 1..65536 bytes, got {read_size}")
     return Profile(name, title, rate, tuple(channels), ("",) * length, (report,),
                    tuple(devices), raw=True, read_size=read_size,
                    path=Path(path) if path else None)
@@ -497,21 +511,23 @@ def parse_profile(data: Mapping, *, path: str | Path = "<profile>") -> Profile:
         _fail(path, "top level", f"'name' must be a non-empty string, got {name!r}")
     title = _text(data, "title", path, "top level", default=name)
     rate = _number(data, "rate", path, "top level", default=0.0)
+    if rate < 0:
+        _fail(path, "top level", f"'rate' must be >= 0 reports per second, got {rate}")
     calibration = _text(data, "calibration", path, "top level")
     if calibration and calibration not in CALIBRATIONS:
         _fail(path, "top level", f"'calibration' must be one of {list(CALIBRATIONS)}, got "
                                  f"{calibration!r}")
-    usage_page = _optional_int(data, "usage_page", path, "top level")
-    usage = _optional_int(data, "usage", path, "top level")
+    usage_page = _id16(data, "usage_page", path, "top level")
+    usage = _id16(data, "usage", path, "top level")
     devices = []
     for index, table in enumerate(_tables(data, "device", path, "top level")):
         where = f"device[{index}]"
         _unknown(table, _DEVICE_KEYS, path, where)
-        devices.append(DeviceMatch(_number(table, "vendor_id", path, where, kind=int),
-                                   _number(table, "product_id", path, where, kind=int),
+        devices.append(DeviceMatch(_id16(table, "vendor_id", path, where, required=True),
+                                   _id16(table, "product_id", path, where, required=True),
                                    _text(table, "name", path, where),
-                                   _optional_int(table, "usage_page", path, where, usage_page),
-                                   _optional_int(table, "usage", path, where, usage)))
+                                   _id16(table, "usage_page", path, where, usage_page),
+                                   _id16(table, "usage", path, where, usage)))
     raw = data.get("raw", False)
     if not isinstance(raw, bool):
         _fail(path, "top level", f"'raw' must be true or false, got {raw!r}")

@@ -3,7 +3,7 @@ out as each device sends them, against values worked out by hand; the numba kern
 slow int.from_bytes reference on random reports; malformed reports; profile-file errors. The
 DualShock 4 and DualSense are also checked against the kernel's emulated pads
 (test_hid_kernel_devices.py); the vectors here cover what that emulation leaves out (the IMU
-clock, the PS and mute buttons, lifting a finger) and the devices it does not have."""
+clock, the PS and mute buttons, the USB adaptor) and the devices it does not have."""
 import logging
 import math
 import zlib

@@ -361,21 +361,25 @@ def test_dualshock4_emulated_pad_with_its_calibration(tmp_path, shim, rng, class
 def test_dualshock4_usb_adaptor_without_controller_gives_no_frames(tmp_path, shim, rng):
     """The USB Wireless Adaptor streams near-zero reports while no controller is connected:
     no frame (no phantom stick at -1), no battery, the reason in the status; frames start when
-    a controller is there."""
-    reports, rdesc, _, _ = emulated_ds4_run(rng, "PS4ControllerUSB", 6)
+    a controller is there, with its calibration, which the adaptor could not give on open."""
+    reports, rdesc, features, _ = emulated_ds4_run(rng, "PS4ControllerUSB", 6)
     absent = bytearray(64)
     absent[0], absent[31] = 0x01, 0x04
     script = [bytes(absent)] * 5 + reports
     out = run_simulated(tmp_path, shim, spec="hid:dualshock4", vendor=0x054C, product=0x0BA0,
                         name="DUALSHOCK 4 USB Wireless Adaptor",
                         manufacturer="Sony Interactive Entertainment", descriptor=rdesc,
-                        reports=script, expect=6)
+                        reports=script, expect=6, features=features,
+                        env={"MOP_HID_FEATURE_FAIL_FIRST": "1"})
     got = np.array(out["values"], dtype=float)
     assert got.shape[0] == 6
-    np.testing.assert_array_equal(got, expected_frames(load_profile("dualshock4"), reports))
+    (feature,) = features.values()
+    calibrated = load_profile("dualshock4").with_affine(
+        parse_calibration(feature, requests("dualshock4", Connection.USB)[0]).affine())
+    np.testing.assert_array_equal(got, expected_frames(calibrated, reports))
     assert out["problems"].get("no controller connected to the USB Wireless Adaptor") == 1
     assert out["malformed"] == 0 and out["device_status"]["no_input"] == ""
-    assert out["device_status"]["calibration"] == "nominal"     # this adaptor serves none
+    assert out["device_status"]["calibration"] == "device"
 
 
 def test_spacemouse_receiver_opens_its_multi_axis_interface(tmp_path, shim, rng):

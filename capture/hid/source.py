@@ -283,6 +283,12 @@ class HidSource(ThreadedSource):
                     self._problem(parsed.skipped)
                 self._no_input = parsed.skipped
                 continue
+            if self._no_input and self._calibration == "nominal":
+                # a controller has just connected to a receiver that had none: its
+                # calibration can be read now (the kernel does the same)
+                self._device_profile = self._calibrated(self._device)
+                parsed = self._parse_into(self._device_profile, report, self._state,
+                                          self._status)
             self._no_input = ""
             if self._sensor_clock is not None:
                 self._sensor_time = self._sensor_clock.update(

@@ -14,7 +14,8 @@
  *    fails with ENOENT. Removing the file "plugs it back in".
  *  - Feature reports: HIDIOCGFEATURE for report id NN returns the bytes (hex, report id
  *    first) in MOP_HID_FEATURE_NN (NN two lower-case hex digits), or fails with EPIPE, as a
- *    device that has no such report does.
+ *    device that has no such report does. With MOP_HID_FEATURE_FAIL_FIRST=1 the first request
+ *    fails anyway (a receiver asked before its controller is there).
  * Built by the test fixture: gcc -shared -fPIC -o hidraw_shim.so hidraw_shim.c -ldl
  */
 #define _GNU_SOURCE
@@ -61,6 +62,12 @@ static int descriptor(unsigned char *out, int max) {
 }
 
 static int feature(unsigned char *buffer, size_t size) {
+    static int requests = 0;
+    const char *fail_first = getenv("MOP_HID_FEATURE_FAIL_FIRST");
+    if (requests++ == 0 && fail_first && strcmp(fail_first, "1") == 0) {
+        errno = EPIPE;
+        return -1;
+    }
     char name[32];
     snprintf(name, sizeof name, "MOP_HID_FEATURE_%02x", buffer[0]);
     const char *hex = getenv(name);

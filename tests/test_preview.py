@@ -96,7 +96,7 @@ def test_preview_page_shows_follower_state_changing_in_chromium(tmp_path):
     for parsed in dumps:
         assert set(parsed.performers) == {"glove", "hand"}
         for _name, cells in parsed.performers.items():
-            assert len(cells) == 6 and cells[1] in ("ok", "silent", "ended"), cells
+            assert len(cells) == 7 and cells[1] in ("ok", "silent", "ended"), cells
     frames = [parsed.frame for parsed in dumps]
     assert frames == sorted(frames) and frames[0] < frames[-1]   # the page follows the show
     shown = [tuple(tuple(cells[2:4]) for cells in parsed.performers.values())

@@ -93,7 +93,7 @@ class ListSource:
         self.closed = True
 
 
-def test_source_feed_newest_frame_silence_failure_and_rejoin():
+def test_source_feed_silence_failure_and_rejoin():
     now = [0.0]
     plugged = {"ok": True}
     sources = []
@@ -105,29 +105,94 @@ def test_source_feed_newest_frame_silence_failure_and_rejoin():
         sources.append(source)
         return source
 
-    feed = SourceFeed(opener, name="p", stale_after=0.5, retry=1.0, clock=lambda: now[0])
+    feed = SourceFeed(opener, name="p", stale_after=0.5, retry=1.0, latency=0.05,
+                      clock=lambda: now[0])
     assert feed.status == SILENT and feed.channels == ("a", "b")
-    sources[0].queue += [ListSource.Frame(0.0, [1, 2]), ListSource.Frame(0.01, [3, 4])]
-    assert feed.poll(0.0) == pytest.approx([3, 4])          # the newest of what arrived
-    assert feed.status == OK and feed.frames == 1
+    sources[0].queue += [ListSource.Frame(0.0, [1, 2]), ListSource.Frame(0.04, [3, 4])]
+    now[0] = 0.04
+    assert feed.poll(0.0, due=0.04) is None and feed.status == SILENT   # not 50 ms old yet
+    now[0] = 0.08
+    assert feed.poll(0.0, due=0.08) == pytest.approx([1, 2])   # locked: the first sample
+    assert feed.status == OK and feed.latency == pytest.approx(0.08) and feed.frames == 2
+    now[0] = 0.10
+    assert feed.poll(0.0, due=0.10) == pytest.approx([2, 3])   # the input 80 ms ago
     now[0] = 0.3
-    assert feed.poll(0.3) == pytest.approx([3, 4])          # held until it is stale
-    now[0] = 0.9
-    assert feed.poll(0.9) is None and feed.status == SILENT
+    assert feed.poll(0.0, due=0.3) == pytest.approx([3, 4]) and feed.late == 1   # held
+    now[0] = 0.6
+    assert feed.poll(0.0, due=0.6) is None and feed.status == SILENT and feed.latency is None
     sources[0].unplugged = True
     plugged["ok"] = False
     now[0] = 1.0
-    assert feed.poll(1.0) is None and feed.status == FAILED
+    assert feed.poll(1.0, due=1.0) is None and feed.status == FAILED
     assert "unplugged" in feed.message and sources[0].closed
     now[0] = 1.5                                             # before the retry time: no attempt
-    assert feed.poll(1.5) is None and len(sources) == 1
+    assert feed.poll(1.5, due=1.5) is None and len(sources) == 1
     now[0] = 2.1                                             # retry fails: still unplugged
-    assert feed.poll(2.1) is None and feed.status == FAILED and "no such device" in feed.message
+    assert feed.poll(2.1, due=2.1) is None and feed.status == FAILED
+    assert "no such device" in feed.message
     plugged["ok"] = True
     now[0] = 3.2
-    assert feed.poll(3.2) is None and feed.status == SILENT and len(sources) == 2
+    assert feed.poll(3.2, due=3.2) is None and feed.status == SILENT and len(sources) == 2
     sources[1].queue.append(ListSource.Frame(3.2, [7, 8]))
-    assert feed.poll(3.3) == pytest.approx([7, 8]) and feed.status == OK
+    now[0] = 3.3
+    assert feed.poll(3.3, due=3.3) == pytest.approx([7, 8]) and feed.status == OK
+    assert feed.latency == pytest.approx(0.1)                # locked again, to the new input
+
+
+def arrivals(rng, times, *, jitter):
+    """Arrival stamps of samples sent at `times`: a little late, each by its own amount."""
+    return times + rng.uniform(0.0, jitter, times.size)
+
+
+@pytest.mark.parametrize("rate, before", [(50.0, 0.0), (30.0, 0.0), (200.0, 0.0),
+                                          (50.0, 0.7), (30.0, 0.35)])
+def test_a_live_feed_gives_the_frames_a_replay_of_the_same_take_gives(rng, rate, before):
+    """The input a follower sees live equals what a replay of the same take gives, frame for
+    frame: resampled at the frame times from the first sample on, though frames ran late.
+    When the input was flowing `before` seconds before the show, from where the show met it."""
+    times = np.arange(int(6 * rate)) / rate
+    values = np.stack([np.sin(2.3 * times), times ** 2, np.cos(7.0 * times)], axis=1)
+    values[37, 1] = np.nan                                       # a missing value
+    start = 100.0 + rng.uniform(0, 1)                            # the show starts ...
+    origin = start - before + rng.uniform(0.0, 0.5)              # ... and the sender then
+    source = ListSource(("a", "b", "c"))
+    stamped = arrivals(rng, origin + times, jitter=1e-9)
+    now = [start]
+    feed = SourceFeed(lambda: source, name="p", latency=0.05, clock=lambda: now[0])
+    sent, live, k = 0, [], 0
+    while len(live) < 120:
+        due = start + k / 25.0
+        # a late loop: the frame runs up to 0.3 s after it was due, the input has gone on
+        now[0] = due + (0.3 if 40 <= k < 50 else 0.002)
+        while sent < times.size and stamped[sent] <= now[0]:
+            source.queue.append(ListSource.Frame(stamped[sent], values[sent]))
+            sent += 1
+        value = feed.poll(k / 25.0, due=due)
+        if value is not None:
+            live.append(value.copy())
+        k += 1
+    assert 0.05 <= feed.latency <= 0.05 + 1 / 25.0 + 1e-9 and feed.late == 0
+    first = int(np.argmin(np.abs(origin + times - (start + (k - 120) / 25.0 - feed.latency))))
+    take = TakeFeed(times[first:], values[first:], ("a", "b", "c"))
+    assert before or first == 0
+    replayed = [take.poll(k / 25.0).copy() for k in range(120)]
+    for frame, (a, b) in enumerate(zip(live, replayed)):
+        np.testing.assert_allclose(a, b, rtol=0, atol=1e-6, err_msg=f"frame {frame}")
+
+
+def test_a_live_feed_ends_with_its_source_and_rebases_foreign_timestamps():
+    source = ListSource(("a",))
+    source.ended = False
+    now = [1000.0]
+    feed = SourceFeed(lambda: source, name="p", latency=0.0, clock=lambda: now[0])
+    source.queue += [ListSource.Frame(0.0, [1.0])]        # not a capture-clock time
+    assert feed.poll(0.0, due=1000.0) == pytest.approx([1.0]) and feed.rebased == 1
+    source.queue += [ListSource.Frame(1000.02, [3.0])]
+    source.ended = True
+    now[0] = 1000.01
+    assert feed.poll(0.0, due=1000.01) == pytest.approx([2.0])   # still following what came
+    now[0] = 1000.05
+    assert feed.poll(0.0, due=1000.05) is None and feed.status == ENDED
 
 
 def test_take_feed_interpolates_like_numpy_and_ends(rng):
@@ -161,7 +226,7 @@ class CountingBank:
 
 def test_performer_selects_channels_by_name_and_normalises():
     source = ListSource(("pinky", "thumb", "x", "index"))
-    feed = SourceFeed(lambda: source, name="p", clock=lambda: 0.0)
+    feed = SourceFeed(lambda: source, name="p", latency=0.0, clock=lambda: 0.0)
     bank = CountingBank()
     performer = PerformerRuntime("p", feed, bank, channels=("thumb", "index"),
                                  shift=[1.0, 2.0], scale=[2.0, 4.0])
@@ -259,7 +324,43 @@ class SlowRenderer:
         return self.inner.render(puppet)
 
 
-def standin_session(mode, *, delay):
+class SlowPuppet:
+    """The stand-in puppet whose step takes `pause` seconds more on the frames `when` says."""
+
+    def __init__(self, when, pause):
+        from session_standin import StripPuppet
+        self.inner = StripPuppet(("tip",))
+        self.when, self.pause, self.steps = when, pause, 0
+
+    def __getattr__(self, name):
+        return getattr(self.inner, name)
+
+    def step(self, dt, targets):
+        import time
+        if self.when(self.steps):
+            time.sleep(self.pause)
+        self.steps += 1
+        self.inner.step(dt, targets)
+
+
+class Recorder:
+    """A state output and a frame output in one: what the loop sent, what the worker wrote."""
+
+    def __init__(self):
+        self.sent, self.written = [], []
+
+    def send(self, state):
+        performer = state["performers"]["p"]
+        self.sent.append((state["frame"], performer["action"], performer["progress"]))
+
+    def write(self, frame, state, *, repeat=False):
+        self.written.append((state["frame"], repeat, frame.copy()))
+
+    def close(self):
+        pass
+
+
+def standin_session(mode, *, delay, pause=None, max_lag=0.5):
     from followers import FollowerBank
     from mop.session.loop import CharacterRuntime, Session
     from session_standin import StripPuppet
@@ -269,42 +370,78 @@ def standin_session(mode, *, delay):
     feed = TakeFeed(np.arange(len(show)) / 25.0, show, ("x",), loop=True)
     performer = PerformerRuntime("p", feed, FollowerBank({"bump": template}), channels=("x",))
     motion = Motion({"tip": ([0.0, 1.6], [[0.0], [2.0]])})
-    puppet = StripPuppet(("tip",))
+    puppet = StripPuppet(("tip",)) if pause is None else SlowPuppet(*pause)
     character = CharacterRuntime("c", puppet, SlowRenderer(puppet, delay), tracks=[
         Track("p", {"bump": (motion, (("tip", "tip"),))}, {"tip": 0.0}, blend=0.2)])
-    return Session([performer], [character], fps=25, mode=mode, stage=Stage((64, 48), (0, 0, 0)))
+    recorder = Recorder()
+    session = Session([performer], [character], fps=25, mode=mode,
+                      stage=Stage((64, 48), (0, 0, 0)), outputs=[recorder], max_lag=max_lag)
+    return session, recorder
 
 
-def test_live_mode_keeps_real_time_by_dropping_renders():
-    import time
-    session = standin_session("live", delay=0.06)          # a render takes 1.5 frame periods
-    start = time.monotonic()
+def test_live_mode_follows_every_frame_and_repeats_the_pictures_it_drops():
+    replayed, reference = standin_session("replay", delay=0.0)
+    replayed.run(duration=2.0)
+    session, recorder = standin_session("live", delay=0.06)   # a render takes 1.5 periods
     report = session.run(duration=2.0)
-    wall = time.monotonic() - start
-    assert wall == pytest.approx(2.0, abs=0.4)              # real time was kept ...
-    assert report.frames >= 40                               # ... every frame was simulated
-    assert report.dropped > 0 and report.rendered < report.frames
-    assert report.rendered + report.dropped >= report.frames
-    assert report.stages["simulate"]["count"] + (report.dropped - (
-        report.rendered + report.dropped - report.frames)) >= report.frames - 5
+    assert report.wall_seconds == pytest.approx(2.0, abs=0.3)     # real time was kept ...
+    assert report.frames == 50 and report.slipped == 0            # ... every frame simulated
+    # the followers saw the same input as in the replay: the same actions and progress
+    assert recorder.sent == reference.sent and len(recorder.sent) == 50
+    # one picture per frame, in order; the dropped ones repeat the picture before them
+    assert [index for index, _, _ in recorder.written] == list(range(50))
+    repeats = [k for k, (_, repeat, _) in enumerate(recorder.written) if repeat]
+    assert report.dropped == len(repeats) > 10 and report.rendered + report.dropped == 50
+    for k in repeats:
+        if k > 0:
+            assert np.array_equal(recorder.written[k][2], recorder.written[k - 1][2])
+    assert "real time: every frame followed and simulated" in report.format()
+
+
+def test_a_late_frame_is_caught_up_at_its_own_time_not_skipped():
+    replayed, reference = standin_session("replay", delay=0.0)
+    replayed.run(duration=2.0)
+    hiccup = (lambda step: step == 22, 0.3)       # warm-up steps twice, so frame 20 stalls
+    session, recorder = standin_session("live", delay=0.0, pause=hiccup)
+    report = session.run(duration=2.0)
+    assert report.frames == 50 and report.slipped == 0 and report.late_frames >= 5
+    assert report.max_late == pytest.approx(0.3, abs=0.15)
+    assert recorder.sent == reference.sent
+    assert report.wall_seconds == pytest.approx(2.0, abs=0.3)
+    assert "caught up" in report.verdict()
+
+
+def test_a_machine_too_slow_for_the_rate_is_reported_plainly():
+    always = (lambda step: True, 0.06)             # the simulation alone takes 1.5 periods
+    session, recorder = standin_session("live", delay=0.0, pause=always, max_lag=0.2)
+    report = session.run(duration=1.2)
+    assert report.slips >= 1 and report.slipped > 0.2
+    assert report.verdict().startswith("NOT real time")
+    assert [frame for frame, _, _ in recorder.sent] == list(range(report.frames))
+    assert [index for index, _, _ in recorder.written] == list(range(report.frames))
+    assert any(e["status"] == "behind" for e in report.events)
 
 
 def test_replay_mode_runs_faster_than_real_time_and_renders_every_frame():
     import time
-    session = standin_session("replay", delay=0.0)
+    session, recorder = standin_session("replay", delay=0.0)
     start = time.monotonic()
     report = session.run(duration=4.0)
     assert time.monotonic() - start < 4.0
     assert report.frames == 100 and report.rendered == 100 and report.dropped == 0
+    assert [(index, repeat) for index, repeat, _ in recorder.written] == [
+        (k, False) for k in range(100)]
     assert session.performers[0].seen == {"bump"}
 
 
 def test_source_feed_follows_a_capture_source_reporting_disconnected():
     source = ListSource(("a",))
     source.status = "disconnected"          # capture's Status value while it reconnects
-    feed = SourceFeed(lambda: source, name="p", clock=lambda: 0.0)
+    now = [0.0]
+    feed = SourceFeed(lambda: source, name="p", latency=0.0, clock=lambda: now[0])
     assert feed.poll(0.0) is None and feed.status == FAILED
     assert "disconnected" in feed.message and not source.closed   # kept: it reconnects itself
     source.status = "ok"
     source.queue.append(ListSource.Frame(0.1, [4.0]))
+    now[0] = 0.1
     assert feed.poll(0.1) == pytest.approx([4.0]) and feed.status == OK

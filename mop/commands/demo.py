@@ -49,7 +49,7 @@ class StillOutput:
         self.frames = 0
 
     def write(self, frame, state, *, repeat: bool = False) -> None:
-        if frame is not None and state["frame"] == self.frame_number:
+        if frame is not None and state is not None and state["frame"] == self.frame_number:
             from PIL import Image
             self.path.parent.mkdir(parents=True, exist_ok=True)
             Image.fromarray(frame, "RGBA").save(self.path, optimize=True)

@@ -122,6 +122,8 @@ def run(args) -> int:
             raise ValueError(f"--replay: performer {live[0].name!r} has a live source "
                              f"({live[0].source}); give --replay {live[0].name}=TAKE, or "
                              f"--realtime to follow it live")
+    if args.no_render and (args.out or args.png):
+        raise ValueError("--out and --png need pictures: leave out --no-render")
     mode = Mode.REPLAY if args.replay is not None and not args.realtime else Mode.LIVE
     osc = parse_host_port(args.osc_out, key="--osc-out") if args.osc_out else None
     out = args.out

@@ -40,6 +40,7 @@ function showPerformers(performers) {
     cell(row, bar(p.progress));
     cell(row, text(p.variance === null ? null : Math.sqrt(p.variance), 3), "sigma");
     cell(row, text(p.log_likelihood, 1), "likelihood");
+    cell(row, p.status === "ok" ? "" : (p.message || ""), "message");
   }
 }
 
@@ -55,6 +56,7 @@ function showCharacters(characters) {
       cell(row, track.action || "rest", "action");
       cell(row, bar(track.progress));
       cell(row, text(track.blend, 2));
+      cell(row, track.state || "");
     }
   }
 }
@@ -92,7 +94,12 @@ async function poll() {
     document.getElementById("time").textContent = text(state.t, 2);
     document.getElementById("mode").textContent = state.mode || "";
     document.getElementById("dropped").textContent = state.dropped;
-    document.getElementById("link").textContent = state.closed ? "session ended" : "live";
+    document.getElementById("link").textContent = state.closed ? "session ended" : "connected";
+    const verdict = document.getElementById("verdict");
+    const behind = state.behind > 0.04 && !state.closed
+      ? " · now " + Math.round(1000 * state.behind) + " ms behind, catching up" : "";
+    verdict.textContent = (state.verdict || "") + behind;
+    verdict.className = (state.verdict || "").startsWith("NOT") ? "warning" : "";
     document.body.dataset.polls = polls;
     showPerformers(state.performers || {});
     showCharacters(state.characters || {});

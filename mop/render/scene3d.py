@@ -462,6 +462,17 @@ class Scene3D:
         return np.array(color)  # own the pixels: GL reuses its buffer
 
     # --- life cycle ----------------------------------------------------------------------------
+    def release(self) -> None:
+        """Make no GL context current in the calling thread, so that another thread may draw
+        this scene next (an EGL context is current in one thread at a time; pyrender makes it
+        current again on its next use)."""
+        platform = None if self._renderer is None else self._renderer._platform
+        display = getattr(platform, "_egl_display", None)
+        if display is None:
+            return
+        from OpenGL.EGL import EGL_NO_CONTEXT, EGL_NO_SURFACE, eglMakeCurrent
+        eglMakeCurrent(display, EGL_NO_SURFACE, EGL_NO_SURFACE, EGL_NO_CONTEXT)
+
     def close(self) -> None:
         """Free the OpenGL context and buffers (idempotent)."""
         if self._renderer is not None:

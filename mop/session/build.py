@@ -110,7 +110,7 @@ def normalisation(templates: list[np.ndarray], how: Normalise) -> tuple[np.ndarr
 
 def performer_templates(config: SessionConfig, performer: PerformerConfig,
                         takes: Mapping[str, TakeData], *, where: str):
-    """{action: (T, D) normalised template}, channel names, shift, scale for one performer.
+    """{action name: (T, D) normalised template}, channel names, shift, scale for one performer.
 
     Each template is its take's action, aligned to the motion and sampled at the session rate:
     the bank then steps once per session frame."""
@@ -121,7 +121,7 @@ def performer_templates(config: SessionConfig, performer: PerformerConfig,
     raw: dict[str, np.ndarray] = {}
     channels = performer.channels
     for action in actions:
-        if action.take in raw:
+        if action.action in raw:
             continue
         data = takes[action.take]
         wanted = channels or data.channels
@@ -134,7 +134,7 @@ def performer_templates(config: SessionConfig, performer: PerformerConfig,
         if not channels:
             channels = data.channels
         index = [data.channels.index(c) for c in channels]
-        raw[action.take] = data.template(config.fps)[:, index]
+        raw[action.action] = data.template(config.fps)[:, index]
     shift, scale = normalisation(list(raw.values()), performer.normalise)
     templates = {name: (values - shift) / scale for name, values in raw.items()}
     return templates, tuple(channels), shift, scale
@@ -250,12 +250,14 @@ def _feed(spec: str, performer: PerformerConfig, store, config: SessionConfig, *
     if opener is None:
         from capture import open_source as opener
     return SourceFeed(lambda: opener(spec), name=performer.name,
-                      stale_after=performer.stale_after)
+                      stale_after=performer.stale_after, latency=performer.latency,
+                      period=1.0 / config.fps)
 
 
 def _tracks(config: SessionConfig, character: CharacterConfig, puppet,
             takes: Mapping[str, TakeData], *, where: str) -> list[Track]:
     by_performer: dict[str, dict[str, tuple]] = {}
+    after: dict[str, dict[str, str]] = {}
     rest: dict[str, dict[str, np.ndarray]] = {}
     owner: dict[str, tuple[str, int]] = {}
     target_names = set(getattr(puppet, "target_names", ()))
@@ -287,8 +289,10 @@ def _tracks(config: SessionConfig, character: CharacterConfig, puppet,
         performer_rest = rest.setdefault(action.performer, {})
         for channel, target in channels:
             performer_rest.setdefault(target, start[channel])
-        by_performer.setdefault(action.performer, {})[action.take] = (motion, tuple(channels))
-    return [Track(performer, motions, rest[performer], blend=config.blend)
+        by_performer.setdefault(action.performer, {})[action.action] = (motion, tuple(channels))
+        after.setdefault(action.performer, {})[action.action] = action.after
+    return [Track(performer, motions, rest[performer], blend=config.blend,
+                  after=after[performer])
             for performer, motions in by_performer.items()]
 
 

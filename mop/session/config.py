@@ -80,6 +80,7 @@ class PerformerConfig:
     sigma: float | None = None
     window: int | None = None
     stale_after: float = 0.5
+    latency: float = 0.05
 
 
 @dataclass(frozen=True)
@@ -96,16 +97,31 @@ class CharacterConfig:
     options: Mapping[str, Any] = field(default_factory=dict)
 
 
+class After(str, enum.Enum):
+    """What a character does when its action ends and nothing else drives it."""
+    REST = "rest"    # blend back to the rest pose over the session's `blend` time
+    HOLD = "hold"    # keep the end pose
+    LOOP = "loop"    # keep playing the motion, from where it was, at its own speed
+
+
 @dataclass(frozen=True)
 class ActionBinding:
     """A take whose action (performed by `performer`) plays its motion on `character`.
 
-    `channels` maps motion channel -> the character's target name; empty = every channel of the
-    take's motion under its own name."""
+    `name` is the action's name (shown in the preview, sent over OSC; default the take's name);
+    `channels` maps motion channel -> the character's target name (empty = every channel of the
+    take's motion under its own name); `after` says what the character does when the action
+    ends."""
     take: str
     performer: str
     character: str
     channels: tuple[tuple[str, str], ...] = ()
+    name: str = ""
+    after: After = After.REST
+
+    @property
+    def action(self) -> str:
+        return self.name or self.take
 
 
 @dataclass(frozen=True)
@@ -333,16 +349,18 @@ def parse_session(user: Mapping[str, Any], *, where: str = "<session>",
                                       table.sub(performer_name).table),
                         f"performers.{performer_name}")
         entry.check_keys(set(defaults["performer_defaults"]) | {"source"})
+        source = entry.string("source", required=True)
         sigma = entry.number("sigma", low=0.0)
         window = entry.number("window", low=0, integer=True)
         performers.append(PerformerConfig(
             name=performer_name,
-            source=entry.string("source", required=True),
+            source=resolve_source(source, base),
             channels=entry.names("channels"),
             normalise=entry.choice("normalise", Normalise),
             sigma=float(sigma) if sigma else None,
             window=int(window) if window else None,
-            stale_after=float(entry.number("stale_after", low=0.01, high=60.0))))
+            stale_after=float(entry.number("stale_after", low=0.01, high=60.0)),
+            latency=float(entry.number("latency", low=0.0, high=1.0))))
 
     characters = []
     table = top.sub("characters")
@@ -382,8 +400,10 @@ def parse_session(user: Mapping[str, Any], *, where: str = "<session>",
         if not isinstance(raw, Mapping):
             raise top.fail(f"actions[{index}]", "a table", raw)
         entry = _Reader(where, _merge(defaults["action_defaults"], raw), f"actions[{index}]")
-        entry.check_keys(set(defaults["action_defaults"]) | {"take", "performer", "character"})
+        entry.check_keys(set(defaults["action_defaults"])
+                         | {"take", "performer", "character", "name"})
         take = entry.string("take", required=True)
+        action_name = entry.string("name") or ""
         performer_name = entry.string("performer", required=True)
         if performer_name not in performer_names:
             raise entry.fail("performer", "one of the performers " + ", ".join(
@@ -402,7 +422,8 @@ def parse_session(user: Mapping[str, Any], *, where: str = "<session>",
         else:
             channels = tuple((name, name) for name in entry.names("channels"))
         actions.append(ActionBinding(take=take, performer=performer_name,
-                                     character=character_name, channels=channels))
+                                     character=character_name, channels=channels,
+                                     name=action_name, after=entry.choice("after", After)))
     _check_bindings(where, actions)
 
     outputs = _Reader(where, _merge(defaults["outputs"], top.sub("outputs").table), "outputs")
@@ -427,9 +448,47 @@ def parse_session(user: Mapping[str, Any], *, where: str = "<session>",
         outputs=config_outputs)
 
 
+def resolve_source(spec: str, base: Path) -> str:
+    """A source spec with a relative file in it (camera:clip.mp4, hid:profile.toml) made
+    absolute against the session file's folder, as assets and takes are; anything else as
+    given (a camera index, a network address, a file that is not there: its error comes when
+    the source opens)."""
+    kind, sep, rest = spec.partition(":")
+    if not sep or kind not in ("camera", "hid") or not rest:
+        return spec
+    body, mark, query = rest.partition("?")
+    head, colon, tail = body.rpartition(":")
+    for device, suffix in ((body, ""), (head, colon + tail)):
+        if not device or device.isdigit() or Path(device).is_absolute():
+            continue
+        if kind == "hid":
+            device, at, selector = device.partition("@")
+            suffix = at + selector + suffix
+        candidate = base / device
+        if candidate.is_file():
+            return f"{kind}:{candidate.resolve()}{suffix}{mark}{query}"
+    return spec
+
+
 def _check_bindings(where: str, actions: list[ActionBinding]) -> None:
     """Several performers may drive one character, each on its own channels: two performers
-    writing the same target of one character would fight, so that is refused."""
+    writing the same target of one character would fight, so that is refused. An action's
+    name stands for one take of its performer, and a take has one name."""
+    named: dict[tuple[str, str], tuple[str, int]] = {}
+    taken: dict[tuple[str, str], tuple[str, int]] = {}
+    for index, action in enumerate(actions):
+        by_name = named.setdefault((action.performer, action.action), (action.take, index))
+        if by_name[0] != action.take:
+            raise SessionError(
+                f"{where}: actions[{index}].name: performer {action.performer!r} already has an "
+                f"action {action.action!r} from take {by_name[0]!r} (actions[{by_name[1]}]); "
+                f"expected one take per action name")
+        by_take = taken.setdefault((action.performer, action.take), (action.action, index))
+        if by_take[0] != action.action:
+            raise SessionError(
+                f"{where}: actions[{index}].name: take {action.take!r} of performer "
+                f"{action.performer!r} is already named {by_take[0]!r} (actions[{by_take[1]}]); "
+                f"expected one name per take")
     owner: dict[tuple[str, str], tuple[str, int]] = {}
     for index, action in enumerate(actions):
         for _, target in action.channels:

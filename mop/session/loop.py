@@ -1,18 +1,26 @@
-"""The session loop: one clock steps every performer, character and output.
+"""The session loop: one clock steps every performer and character; pictures are drawn beside it.
 
-Per frame (session time t = frame / fps):
+Per frame k (session time t = k / fps), in order, for every frame of the show:
 
-1. capture   each performer's feed gives its newest values without blocking;
+1. capture   each performer's feed gives its input at the frame's time (a take sampled at t; a
+             live source resampled from what arrived, a fixed latency before the frame was due);
 2. follow    the performer's follower bank steps on the selected, normalised values;
-3. simulate  every character's tracks turn (action, progress) into targets — the motion sampled
+3. simulate  every character's tracks turn (action, progress) into targets - the motion sampled
              at progress x duration, cross-faded over `blend` seconds when the action changes,
-             relaxing to rest when there is none — and the puppet steps by 1 / fps;
-4. render    each character draws its layer and the stage composes them;
-5. output    video, PNG, OSC, preview.
+             and when the action ends, what its binding says (`after`: rest, hold or loop) -
+             and the puppet steps by 1 / fps;
+4. send      state outputs (OSC, the preview's state) get the frame's state;
+5. pictures  the render worker (`mop.session.worker`) gets a copy of every surface; it draws,
+             composes and writes the frame outputs (video, PNG, preview picture) in its thread.
 
-Live mode keeps real time: a frame that starts more than one period late skips render (the
-outputs repeat the last picture) and frames further behind are skipped whole; replay mode runs as
-fast as it can on the session clock, so the same takes give the same frames.
+Live mode keeps the wall clock: frame k is due at start + k / fps. A frame that is late is still
+followed and simulated, and the next ones run back to back until the loop has caught up (their
+input is taken at their own times, so nothing is seen sped up); only pictures are dropped, and a
+dropped picture goes to the video as a repeat. When the loop is more than `max_lag` seconds
+behind, the machine cannot keep the rate: the session clock slips (the show goes on from now,
+the input of the slipped time is not followed) and the report and the preview say so.
+Replay mode runs as fast as it can on the session clock and renders every frame: the same takes
+give the same frames.
 """
 from __future__ import annotations
 
@@ -25,6 +33,7 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
+from .config import After
 from .feeds import ENDED, OK
 from .timing import SessionReport, StageClock
 
@@ -32,7 +41,7 @@ log = logging.getLogger(__name__)
 
 
 class Mode(str, enum.Enum):
-    LIVE = "live"       # wall clock; render frames are dropped rather than falling behind
+    LIVE = "live"       # wall clock; pictures are dropped rather than falling behind
     REPLAY = "replay"   # session clock; as fast as possible; deterministic
 
 
@@ -79,8 +88,8 @@ class PerformerRuntime:
         self.state = FollowState()
         self.status = feed.status
         self.was_ok = feed.status == OK
-        self.message = ""
         self.seen: set[str] = set()
+        self.steps = 0               # bank steps since the input was last (re)joined
         self.problem = ""            # why the input cannot be followed right now, if it cannot
         self._reported = ""
         self._feed_channels: tuple[str, ...] | None = None
@@ -126,6 +135,7 @@ class PerformerRuntime:
             if self._following:
                 self.bank.reset()
                 self._following = False
+                self.steps = 0
             self.state = FollowState()
             return
         try:
@@ -137,6 +147,7 @@ class PerformerRuntime:
         self.problem = ""
         out = self.bank.step(x)
         self._following = True
+        self.steps += 1
         self._last = out
         state = self.state
         state.action = out.action
@@ -153,26 +164,38 @@ class PerformerRuntime:
             return {}
         return dict(getattr(self._last, "posterior", None) or {})
 
+    def warm_up(self) -> None:
+        """Step the bank once and forget it (compiles what a first step compiles)."""
+        width = len(self.channels) or int(getattr(self.bank, "channels", 0) or 0)
+        if width:
+            self.bank.step(np.zeros(width))
+            self.bank.reset()
+
 
 class Track:
     """One performer's hold on one character: which action plays which motion on which targets.
 
     motions : {action: (Motion, ((motion channel, target name), ...))}
-    rest : {target: (c,) float} the values a target relaxes towards before it is let go."""
+    rest : {target: (c,) float} the values a target relaxes towards before it is let go;
+    after : {action: After} what the character does when that action ends (default rest)."""
 
     def __init__(self, performer: str, motions: Mapping[str, tuple[Any, tuple]],
-                 rest: Mapping[str, np.ndarray], *, blend: float):
+                 rest: Mapping[str, np.ndarray], *, blend: float,
+                 after: Mapping[str, After | str] | None = None):
         self.performer = performer
         self.motions = dict(motions)
         self.rest = {k: float(np.ravel(v)[0]) if np.size(v) == 1 else np.asarray(v, float)
                      for k, v in rest.items()}
         self.blend = float(blend)
+        self.after = {name: After(value) for name, value in (after or {}).items()}
         self.current: str | None = None
+        self.mode = "rest"           # "active" (performed), "hold", "loop" or "rest"
         self.progress = 0.0
         self.weight = 1.0
         self.blend_from: dict[str, np.ndarray] = {}
         self.blend_start = -math.inf
         self.last: dict[str, np.ndarray] = {}
+        self._last_t = 0.0
 
     @property
     def targets(self) -> set[str]:
@@ -180,27 +203,44 @@ class Track:
 
     def reset(self) -> None:
         self.current = None
+        self.mode = "rest"
         self.blend_from = {}
         self.last = {}
         self.blend_start = -math.inf
 
+    def _next(self, t: float, state: FollowState) -> tuple[str | None, str, float]:
+        """(action, mode, progress) this frame: the performed action when it is one of this
+        track's, else what the ended action's `after` says."""
+        if state.action in self.motions:
+            return state.action, "active", min(max(state.progress, 0.0), 1.0)
+        current = self.current
+        after = self.after.get(current, After.REST) if current is not None else After.REST
+        if after is After.HOLD:
+            return current, "hold", self.progress
+        if after is After.LOOP:
+            motion = self.motions[current][0]
+            step = (t - self._last_t) / motion.duration if motion.duration > 0 else 0.0
+            return current, "loop", math.fmod(self.progress + step, 1.0)
+        return None, "rest", 0.0
+
     def update(self, t: float, state: FollowState, out: dict) -> None:
         """Write this track's targets for session time t [s] into `out` {target: float or (c,)
         float} (one-component channels as floats)."""
-        active = state.action if state.action in self.motions else None
-        if active != self.current:
+        action, mode, progress = self._next(t, state)
+        self._last_t = t
+        # a cross-fade starts when the motion changes, or when a held or looping motion is
+        # performed again (its progress starts over); ending into hold or loop goes on smoothly
+        changed = action != self.current or (mode == "active" and self.mode in ("hold", "loop"))
+        if changed:
             self.blend_from = self.last
             self.blend_start = t
-            self.current = active
+        self.current, self.mode, self.progress = action, mode, progress
         weight = 1.0 if self.blend <= 0 else smoothstep((t - self.blend_start) / self.blend)
         self.weight = weight
         goal: dict[str, np.ndarray] = {}
-        if active is None:
-            self.progress = 0.0
-        else:
-            motion, channels = self.motions[active]
-            self.progress = min(max(state.progress, 0.0), 1.0)
-            sample = motion.sample(self.progress * motion.duration)
+        if action is not None:
+            motion, channels = self.motions[action]
+            sample = motion.sample(progress * motion.duration)
             for channel, target in channels:
                 value = sample[channel]
                 # a one-component channel (finger bend, joint angle) is a plain float target
@@ -231,19 +271,45 @@ class CharacterRuntime:
         self.tracks = list(tracks)
         self.targets: dict[str, np.ndarray] = {}
 
+    def warm_up(self, dt: float) -> None:
+        """Step the puppet on its rest targets and draw it once, then put it back at rest
+        (compiles what a first frame compiles; a puppet without reset() is not stepped)."""
+        reset = getattr(self.puppet, "reset", None)
+        if reset is not None:
+            rest: dict[str, Any] = {}
+            for track in self.tracks:
+                rest.update(track.rest)
+            self.puppet.step(dt, rest)
+            self.puppet.step(dt, {})
+            reset()
+        if self.renderer is not None:
+            self.renderer.render(self.puppet)
+
+
+def _frame_outputs(outputs) -> list:
+    return [o for o in outputs if callable(getattr(o, "write", None))]
+
+
+def _state_outputs(outputs) -> list:
+    return [o for o in outputs if callable(getattr(o, "send", None))]
+
 
 class Session:
     """Performers x characters x outputs on one clock. Build one with `mop.session.build`;
     this class only runs what it is given.
 
     performers : PerformerRuntime; characters : CharacterRuntime (drawn in this order);
-    stage : mop.render.compose.Stage or None (no rendering); outputs : objects with
-    `write(frame (H, W, 4) uint8 | None, state: dict, *, repeat: bool)` and `close()`."""
+    stage : mop.render.compose.Stage or None (no pictures); outputs : objects with
+    `send(state)` (called in the loop, every frame) and/or `write(frame (H, W, 4) uint8, state,
+    *, repeat: bool)` (called by the render worker, once per frame, in order; `repeat` when the
+    frame's render was dropped and the previous picture stands in); both have `close()`.
+    max_lag [s]: how far live mode may fall behind the wall clock before the session clock
+    slips (see the module docstring)."""
 
     def __init__(self, performers: Sequence[PerformerRuntime],
                  characters: Sequence[CharacterRuntime], *, fps: int = 25,
                  mode: Mode | str = Mode.REPLAY, stage=None, outputs: Sequence = (),
-                 tail: float = 0.0, name: str = "session"):
+                 tail: float = 0.0, name: str = "session", max_lag: float = 0.5):
         self.name = name
         self.performers = list(performers)
         self.characters = list(characters)
@@ -253,32 +319,55 @@ class Session:
         self.stage = stage
         self.outputs = list(outputs)
         self.tail = float(tail)
+        self.max_lag = float(max_lag)
         self.frame_index = 0
         self.t = 0.0
         self.clock = StageClock()
-        self.rendered = 0
-        self.dropped = 0
         self.events: list[dict] = []
-        self.frame: np.ndarray | None = None
         self.ended_at: float | None = None
         self.wall_start: float | None = None
         self.wall_seconds = 0.0
+        self.warmup_seconds = 0.0
         self.closed = False
         self.stop_requested = False
+        self.late_frames = 0          # live: frames that started more than a period late
+        self.max_late = 0.0           # [s] the most a frame started late
+        self.slipped = 0.0            # [s] the session clock gave up to keep up
+        self.slips = 0
+        self.lag = 0.0                # [s] how late the last frame started
+        self.worker = None
+        self._warm = False
+        self._start = 0.0
         self._by_name = {p.name: p for p in self.performers}
+        self._state_outputs = _state_outputs(self.outputs)
+        self._frame_outputs = _frame_outputs(self.outputs)
+
+    # counters the report and the preview show -----------------------------------------------
+    @property
+    def rendered(self) -> int:
+        return 0 if self.worker is None else self.worker.rendered
+
+    @property
+    def dropped(self) -> int:
+        """Frames whose picture was not drawn (a repeat of the previous one stands in)."""
+        return 0 if self.worker is None else self.worker.repeated
+
+    @property
+    def frame(self) -> np.ndarray | None:
+        return None if self.stage is None or self.rendered == 0 else self.stage.frame
 
     # one frame ---------------------------------------------------------------------------
-    def step(self, *, render: bool = True) -> None:
-        """Advance one frame at session time `self.t`."""
+    def step(self, *, due: float | None = None) -> None:
+        """Follow and simulate one frame at session time `self.t` (due at `due` on the capture
+        clock, live; default now), send its state, and hand its pictures to the worker."""
         t = self.t
         clock = time.perf_counter
         start = clock()
         for performer in self.performers:
-            performer.values = performer.feed.poll(t)
+            performer.values = performer.feed.poll(t, due=due)
             status = performer.feed.status
             if status != performer.status:
-                message = performer.feed.message
-                self._event(performer, status, message)
+                self._event(performer, status, performer.feed.message)
                 performer.status = status
         captured = clock()
         for performer in self.performers:
@@ -297,34 +386,19 @@ class Session:
                 track.update(t, self._by_name[track.performer].state, targets)
             character.puppet.step(self.dt, targets)
         simulated = clock()
-        rendered = simulated
-        frame = None
-        if render and self.stage is not None:
-            self.stage.clear()
-            for character in self.characters:
-                self.stage.place(character.renderer.render(character.puppet), character.position)
-            frame = self.stage.frame
-            self.frame = frame
-            self.rendered += 1
-            rendered = clock()
-        elif self.stage is not None:
-            self.dropped += 1
-        if self.outputs:
-            state = self.state()
-            for output in self.outputs:
-                output.write(frame if frame is not None else self.frame, state,
-                             repeat=frame is None)
+        state = self.state() if self._state_outputs or self.worker is not None else None
+        for output in self._state_outputs:
+            output.send(state)
+        if self.worker is not None:
+            self.worker.submit(self.frame_index, state)
         done = clock()
         add = self.clock.add
         add("capture", 1e3 * (captured - start))
         add("follow", 1e3 * (followed - captured))
         add("simulate", 1e3 * (simulated - followed))
-        if frame is not None:
-            add("render", 1e3 * (rendered - simulated))
-        add("output", 1e3 * (done - rendered))
+        add("send", 1e3 * (done - simulated))
         add("total", 1e3 * (done - start))
         add("input_to_pose", 1e3 * (simulated - start))
-        add("input_to_output", 1e3 * (done - start))
         self.frame_index += 1
         self.t = self.frame_index * self.dt
 
@@ -335,10 +409,15 @@ class Session:
             performer.was_ok = True
         else:
             text = f"{status}: {message}" if message else status
-        self.events.append({"t": self.t, "performer": performer.name, "status": status,
-                            "message": text})
+        self._note(performer.name, status, text)
         if status not in (OK, ENDED):
             log.warning("performer %s %s at t=%.2f s", performer.name, text, self.t)
+
+    def _note(self, who: str, status: str, message: str) -> None:
+        self.events.append({"t": self.t, "performer": who, "status": status,
+                            "message": message})
+        if len(self.events) > 1000:      # a flapping source must not grow this forever
+            del self.events[:100]
 
     # the whole show ----------------------------------------------------------------------
     def request_stop(self) -> None:
@@ -347,7 +426,7 @@ class Session:
 
     @property
     def finished(self) -> bool:
-        """True once every performer's take has ended (live sources never end) and the
+        """True once every performer's input has ended (live sources never end) and the
         characters had `tail` seconds to settle."""
         if self.stop_requested:
             return True
@@ -358,11 +437,34 @@ class Session:
             self.ended_at = self.t
         return self.t - self.ended_at >= self.tail
 
+    def warm_up(self) -> None:
+        """Before the clock starts: step every bank and puppet once and draw every character
+        (then put them back), so that nothing compiles or builds during the show."""
+        if self._warm:
+            return
+        started = time.monotonic()
+        for performer in self.performers:
+            performer.warm_up()
+        for character in self.characters:
+            character.warm_up(self.dt)
+        if self.stage is not None:
+            self.stage.clear()
+            for character in self.characters:
+                self.stage.place(character.renderer.render(character.puppet), character.position)
+        self._warm = True
+        self.warmup_seconds = time.monotonic() - started
+
     def run(self, *, duration: float | None = None, progress=None) -> SessionReport:
-        """Run until the takes end, `duration` [s] of session time passes, or Ctrl-C; the
+        """Run until the inputs end, `duration` [s] of session time passes, or Ctrl-C; the
         outputs are closed in every case. `progress(session)` is called once per frame."""
-        self.wall_start = time.monotonic()
+        from .worker import RenderWorker
         try:
+            self.warm_up()
+            if self.stage is not None and self._frame_outputs:
+                self.worker = RenderWorker(self.stage, self.characters, self._frame_outputs,
+                                           lossless=self.mode is Mode.REPLAY, clock=self.clock)
+                self.worker.start()
+            self.wall_start = time.monotonic()
             if self.mode is Mode.REPLAY:
                 while not self.finished and (duration is None or self.t < duration):
                     self.step()
@@ -371,35 +473,53 @@ class Session:
             else:
                 self._run_live(duration, progress)
         finally:
-            self.wall_seconds = time.monotonic() - self.wall_start
+            self.wall_seconds = time.monotonic() - (self.wall_start or time.monotonic())
             self.close()
         return self.report()
 
     def _run_live(self, duration, progress) -> None:
         period = self.dt
-        start = time.monotonic()
+        monotonic = time.monotonic
+        self._start = monotonic()
         while not self.finished and (duration is None or self.t < duration):
-            due = start + self.frame_index * period
-            wait = due - time.monotonic()
+            due = self._start + self.frame_index * period
+            wait = due - monotonic()
             if wait > 0:
                 time.sleep(wait)
-            late = time.monotonic() - due
-            if late > 3 * period:
-                # Far behind: skip whole frames so the show stays in real time.
-                skipped = int(late / period) - 1
-                self.dropped += skipped
-                self.frame_index += skipped
-                self.t = self.frame_index * self.dt
-            self.step(render=late < period)
+            late = monotonic() - due
+            self.lag = max(late, 0.0)
+            if late > period:
+                self.late_frames += 1
+                self.max_late = max(self.max_late, late)
+            if late > self.max_lag:
+                self._slip(late)
+                due += late
+            self.step(due=due)
             if progress is not None:
                 progress(self)
 
+    def _slip(self, late: float) -> None:
+        """The loop is `late` seconds behind: the machine cannot keep the rate. The session
+        clock moves on to now; the input of the time in between is not followed."""
+        self._start += late
+        self.slipped += late
+        self.slips += 1
+        self._note("session", "behind", f"the simulation could not keep {self.fps} fps: "
+                   f"{late:.2f} s behind real time, that much input was not followed")
+        log.warning("session %s: %.2f s behind real time; the clock slipped", self.name, late)
+
     def close(self) -> None:
-        """Finalise every output (idempotent): a video stopped by Ctrl-C still plays."""
+        """Finish the pictures, finalise every output (idempotent): a video stopped by Ctrl-C
+        still plays, with one picture per frame performed."""
         if self.closed:
             return
         self.closed = True
         errors = []
+        if self.worker is not None:
+            try:
+                self.worker.finish(self.frame_index)
+            except Exception as error:  # close the outputs anyway, then report
+                errors.append(error)
         for output in self.outputs:
             try:
                 output.close()
@@ -418,23 +538,37 @@ class Session:
             raise errors[0]
 
     # reporting ---------------------------------------------------------------------------
+    @property
+    def mode_label(self) -> str:
+        """"live", "replay" or "replay in real time" (takes on the wall clock)."""
+        if self.mode is Mode.REPLAY:
+            return "replay"
+        replayed = all(hasattr(p.feed, "duration") for p in self.performers)
+        return "replay in real time" if replayed and self.performers else "live"
+
     def state(self) -> dict:
         """Everything a viewer may want about now: performers, characters, timing."""
         return {
             "session": self.name, "frame": self.frame_index, "t": self.t,
-            "mode": self.mode.value, "fps": self.fps,
+            "mode": self.mode_label, "fps": self.fps,
             "performers": {p.name: {"status": "failed" if p.problem else p.status,
                                     "message": p.problem or p.feed.message,
+                                    "input_frame": p.steps - 1 if p.steps else None,
                                     **p.state.as_dict(), "posterior": p.posterior()}
                            for p in self.performers},
             "characters": {c.name: {
-                "tracks": [{"performer": tr.performer, "action": tr.current,
+                "tracks": [{"performer": tr.performer, "action": tr.current, "state": tr.mode,
                             "progress": tr.progress, "blend": tr.weight}
                            for tr in c.tracks],
                 "targets": {k: np.atleast_1d(v).tolist() for k, v in c.targets.items()}}
                 for c in self.characters},
-            "dropped": self.dropped, "rendered": self.rendered,
         }
+
+    def counters(self) -> dict:
+        """How the show keeps up right now (for the preview): pictures drawn and dropped, how
+        late the last frame started [s], the time the clock slipped [s]."""
+        return {"rendered": self.rendered, "dropped": self.dropped, "behind": self.lag,
+                "slipped": self.slipped, "late_frames": self.late_frames}
 
     def report(self) -> SessionReport:
         wall = self.wall_seconds if self.closed or self.wall_start is None else (
@@ -442,5 +576,10 @@ class Session:
         return SessionReport(
             frames=self.frame_index, rendered=self.rendered, dropped=self.dropped, fps=self.fps,
             wall_seconds=wall, stages=self.clock.summary(), events=list(self.events),
-            performers={p.name: {"status": p.status, "frames": p.feed.frames,
-                                 "actions_seen": sorted(p.seen)} for p in self.performers})
+            performers={p.name: {"status": p.status, "message": p.problem or p.feed.message,
+                                 "frames": p.feed.frames,
+                                 "latency": getattr(p.feed, "latency", None),
+                                 "actions_seen": sorted(p.seen)} for p in self.performers},
+            mode=self.mode_label, pictures=self.worker is not None,
+            late_frames=self.late_frames, max_late=self.max_late, slipped=self.slipped,
+            slips=self.slips, warmup_seconds=self.warmup_seconds)

@@ -1,14 +1,18 @@
 """Where a session's frames and states go: video, PNG sequence, OSC, the live preview.
 
-Every output has `write(frame, state, *, repeat)` and `close()`. `frame` is the composed
-(H, W, 4) uint8 RGBA picture (straight alpha) or None when nothing was rendered yet; `repeat`
-is True when live mode dropped this frame's render and `frame` is the previous picture (a video
-repeats it to keep its duration; a PNG sequence does not write it again).
+Frame outputs have `write(frame, state, *, repeat)`: the render worker calls it once per session
+frame, in order, with the composed (H, W, 4) uint8 RGBA picture (straight alpha; the worker
+reuses the buffer, so copy what you keep); `repeat` is True when this frame's render was dropped
+and `frame` is the previous picture (a video repeats it to keep its duration; a PNG sequence
+does not write it again). State outputs have `send(state)`: the loop calls it every frame, right
+after the simulation (OSC). Both have `close()`.
 """
 from __future__ import annotations
 
 import logging
 from pathlib import Path
+
+import numpy as np
 
 log = logging.getLogger(__name__)
 
@@ -58,8 +62,10 @@ class OscOutput:
 
     /mop/frame                       i frame, f t [s]
     /mop/performer/NAME              s status, s action ("" = none), f progress, f variance,
-                                     f log-likelihood
-    /mop/character/NAME/action       s action ("" = rest), s performer — one per track
+                                     f log-likelihood, i input frame (the bank's step since
+                                     the input was (re)joined; -1 = not following)
+    /mop/character/NAME/action       s action ("" = rest), s performer, s state ("active",
+                                     "hold", "loop" or "rest") — one per track
     /mop/character/NAME/progress     f progress in [0, 1], f blend weight — one per track
     /mop/character/NAME/target/T     f... the control target T (1, 2 or 3 floats)
     """
@@ -90,13 +96,15 @@ class OscOutput:
         bundle = self._bundle(self._immediately)
         self._add(bundle, "/mop/frame", int(state["frame"]), float(state["t"]))
         for name, performer in state["performers"].items():
+            step = performer.get("input_frame")
             self._add(bundle, f"/mop/performer/{name}", performer["status"],
                       performer["action"] or "", float(performer["progress"]),
-                      float(performer["variance"]), float(performer["log_likelihood"]))
+                      float(performer["variance"]), float(performer["log_likelihood"]),
+                      -1 if step is None else int(step))
         for name, character in state["characters"].items():
             for track in character["tracks"]:
                 self._add(bundle, f"/mop/character/{name}/action", track["action"] or "",
-                          track["performer"])
+                          track["performer"], track.get("state", "active"))
                 self._add(bundle, f"/mop/character/{name}/progress", float(track["progress"]),
                           float(track["blend"]))
             for target, value in character["targets"].items():
@@ -104,7 +112,7 @@ class OscOutput:
                           *(float(v) for v in value))
         return bundle.build()
 
-    def write(self, frame, state, *, repeat: bool = False) -> None:
+    def send(self, state: dict) -> None:
         try:
             self.client.send(self.build(state))
             self.sent += 1
@@ -120,19 +128,25 @@ class OscOutput:
 
 
 class BackgroundOutput:
-    """Runs another output's writes in a worker thread, in order, so encoding a frame overlaps
-    with simulating and rendering the next one (OpenCV's encoder and NumPy release the GIL).
+    """Runs another output's writes in a thread of its own, in order, so encoding a frame
+    overlaps drawing the next one (OpenCV's encoder and Pillow's release the GIL).
 
-    `write` copies the frame (the stage reuses its buffer) and queues it; with `queue_size`
-    frames waiting it blocks, so a slow disk slows the show down rather than eating memory.
-    `close` drains the queue, then closes the inner output."""
+    `write` copies the frame into one of `queue_size` + 2 reused buffers (a repeat reuses the
+    previous copy) and queues it; with `queue_size` frames waiting it blocks, so a slow disk
+    slows the pictures down rather than eating memory. `close` drains the queue, then closes
+    the inner output; an error of the inner output is raised by the next write or by close."""
 
-    def __init__(self, inner, *, queue_size: int = 6):
+    def __init__(self, inner, *, queue_size: int = 4):
         import queue
         import threading
         self.inner = inner
         self.queue: queue.Queue = queue.Queue(maxsize=queue_size)
+        self.free: queue.Queue = queue.Queue()
+        self.buffers = queue_size + 2
         self.error: BaseException | None = None
+        self._last = None
+        self._held: dict[int, int] = {}        # buffer id -> queued writes still reading it
+        self._lock = threading.Lock()
         self.thread = threading.Thread(target=self._work, name=f"mop-{type(inner).__name__}",
                                        daemon=True)
         self.thread.start()
@@ -151,16 +165,50 @@ class BackgroundOutput:
             item = self.queue.get()
             if item is None:
                 return
+            frame, state, repeat = item
             if self.error is None:
                 try:
-                    self.inner.write(*item[:2], repeat=item[2])
+                    self.inner.write(frame, state, repeat=repeat)
                 except BaseException as error:  # reported by the next write or close
                     self.error = error
+            if frame is not None:
+                self._release(frame)
+
+    def _release(self, frame) -> None:
+        with self._lock:
+            key = id(frame)
+            self._held[key] -= 1
+            if self._held[key] == 0 and frame is not self._last:
+                del self._held[key]
+                self.free.put(frame)
+
+    def _copy(self, frame, repeat: bool):
+        """A buffer holding `frame`: the previous copy for a repeat, else a free or new one."""
+        import queue
+        with self._lock:
+            last = self._last
+            if repeat and last is not None and last.shape == frame.shape:
+                self._held[id(last)] += 1
+                return last
+        try:
+            buffer = self.free.get_nowait()
+        except queue.Empty:
+            buffer = None
+        if buffer is None or buffer.shape != frame.shape:
+            buffer = np.empty_like(frame)
+        np.copyto(buffer, frame)
+        with self._lock:
+            previous, self._last = self._last, buffer
+            self._held[id(buffer)] = self._held.get(id(buffer), 0) + 1
+            if previous is not None and self._held.get(id(previous)) == 0:
+                del self._held[id(previous)]
+                self.free.put(previous)
+        return buffer
 
     def write(self, frame, state, *, repeat: bool = False) -> None:
         if self.error is not None:
             raise self.error
-        self.queue.put((None if frame is None else frame.copy(), state, repeat))
+        self.queue.put((None if frame is None else self._copy(frame, repeat), state, repeat))
 
     def close(self) -> None:
         if self.closed:

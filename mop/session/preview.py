@@ -3,19 +3,24 @@ follower state and the session's timing.
 
     GET /             the page (mop/preview/index.html, preview.js, preview.css)
     GET /state.json   performers (status, action, progress, variance, log-likelihood, posterior),
-                      characters (tracks, targets), timing (per-stage ms), frame counters
+                      characters (tracks, targets), timing (per-stage ms), frame counters,
+                      whether the show keeps real time
     GET /frame.jpg    the newest rendered frame (JPEG; transparency shown over dark grey)
     GET /stream.mjpg  the rendered stream as MJPEG (for VLC, OBS, a browser <img>)
 
-It binds 127.0.0.1 by default: the page is for the people in the room, not the network. The
-server runs in daemon threads; the session loop only hands it a copy of a frame now and then
-(at most `max_rate` per second), and encoding happens in the server's threads, on request.
+It binds 127.0.0.1 by default: the page is for the people in the room, not the network.
+Viewers can never slow the show: the loop only hands over a reference to its state each frame
+(`send`), and the render worker encodes a JPEG at most `max_rate` times a second (`write`);
+the server's threads only serve bytes made once, whatever the number of viewers. The server
+itself is bounded: at most `max_connections` connections at a time (more are closed at once),
+`timeout` seconds for a silent or stuck client, and request counts only for its own pages.
 """
 from __future__ import annotations
 
 import json
 import logging
 import math
+import socket
 import threading
 import time
 from http import HTTPStatus
@@ -29,6 +34,10 @@ log = logging.getLogger(__name__)
 ASSETS = Path(__file__).resolve().parent.parent / "preview"
 _CONTENT_TYPES = {".html": "text/html; charset=utf-8", ".js": "text/javascript; charset=utf-8",
                   ".css": "text/css; charset=utf-8"}
+PAGES = ("/", "/index.html", "/preview.js", "/preview.css", "/state.json", "/frame.jpg",
+         "/stream.mjpg")
+MAX_CONNECTIONS = 32
+TIMEOUT = 10.0
 
 
 def _jsonable(value):
@@ -44,26 +53,68 @@ def _jsonable(value):
     return value
 
 
+class _BoundedServer(ThreadingHTTPServer):
+    """A threading HTTP server with at most `limit` connections being served at a time: one
+    more is closed at once (counted in `refused`), so idle or hostile clients cannot pile up
+    threads."""
+
+    daemon_threads = True
+    request_queue_size = 64
+
+    def __init__(self, address, handler, *, limit: int):
+        self.limit = limit
+        self.active = 0
+        self.refused = 0
+        self._count_lock = threading.Lock()
+        super().__init__(address, handler)
+
+    def process_request(self, request, client_address):
+        with self._count_lock:
+            if self.active >= self.limit:
+                self.refused += 1
+                refuse = True
+            else:
+                self.active += 1
+                refuse = False
+        if refuse:
+            self.shutdown_request(request)
+            return
+        try:
+            super().process_request(request, client_address)
+        except BaseException:
+            with self._count_lock:
+                self.active -= 1
+            raise
+
+    def process_request_thread(self, request, client_address):
+        try:
+            super().process_request_thread(request, client_address)
+        finally:
+            with self._count_lock:
+                self.active -= 1
+
+
 class PreviewOutput:
     """Serve the preview page on http://host:port/ (port 0 = any free port; see `.url`)."""
 
     def __init__(self, *, host: str = "127.0.0.1", port: int = 0, max_rate: float = 12.0,
-                 jpeg_quality: int = 80):
+                 jpeg_quality: int = 80, max_connections: int = MAX_CONNECTIONS,
+                 timeout: float = TIMEOUT):
         self.max_rate = max_rate
         self.jpeg_quality = jpeg_quality
         self.session = None         # set by the builder: timing comes from session.report()
         self._lock = threading.Lock()
         self._changed = threading.Condition(self._lock)
-        self._frame: np.ndarray | None = None
-        self._frame_number = -1
         self._jpeg: tuple[int, bytes] | None = None
         self._state: dict = {"frame": 0, "performers": {}, "characters": {}}
-        self._last_copy = -math.inf
+        self._state_json: tuple[int, float, bytes] | None = None
+        self._last_encoded = -math.inf
+        self._rgb: np.ndarray | None = None
         self.requests: dict[str, int] = {}
+        self.frames = 0
         self.closed = False
-        handler = type("PreviewHandler", (_Handler,), {"preview": self})
-        self.server = ThreadingHTTPServer((host, int(port)), handler)
-        self.server.daemon_threads = True
+        handler = type("PreviewHandler", (_Handler,), {"preview": self, "timeout": timeout})
+        self.server = _BoundedServer((host, int(port)), handler, limit=max_connections)
         self.host, self.port = self.server.server_address[:2]
         self.thread = threading.Thread(target=self.server.serve_forever,
                                        name="mop-preview", daemon=True)
@@ -73,18 +124,37 @@ class PreviewOutput:
     def url(self) -> str:
         return f"http://{self.host}:{self.port}/"
 
-    # called by the session loop ------------------------------------------------------------
+    # called by the session loop, every frame -----------------------------------------------
+    def send(self, state: dict) -> None:
+        self._state = state          # one reference: the loop never waits here
+
+    # called by the render worker, once per frame ---------------------------------------------
     def write(self, frame, state, *, repeat: bool = False) -> None:
         now = time.monotonic()
-        copy_frame = frame is not None and not repeat and now - self._last_copy >= 1 / self.max_rate
-        picture = frame.copy() if copy_frame else None
+        if frame is None or repeat or now - self._last_encoded < 1.0 / self.max_rate:
+            return
+        self._last_encoded = now
+        encoded = (int(state["frame"]) if state else self.frames, self._encode(frame))
+        self.frames += 1
         with self._lock:
-            self._state = state
-            if picture is not None:
-                self._frame = picture
-                self._frame_number = state["frame"]
-                self._last_copy = now
-                self._changed.notify_all()
+            self._jpeg = encoded
+            self._changed.notify_all()
+
+    def _encode(self, frame: np.ndarray) -> bytes:
+        """JPEG of an RGBA frame; transparent parts over dark grey."""
+        import cv2
+        if self._rgb is None or self._rgb.shape[:2] != frame.shape[:2]:
+            self._rgb = np.empty(frame.shape[:2] + (3,), np.uint8)
+        bgr = self._rgb
+        cv2.cvtColor(frame, cv2.COLOR_RGBA2BGR, dst=bgr)
+        alpha = frame[..., 3]
+        if alpha.min() < 255:
+            weight = alpha[..., None].astype(np.uint32)
+            bgr[...] = (bgr * weight + 40 * (255 - weight) + 127) // 255
+        ok, data = cv2.imencode(".jpg", bgr, [cv2.IMWRITE_JPEG_QUALITY, self.jpeg_quality])
+        if not ok:
+            raise RuntimeError("JPEG encoding of the preview frame failed")
+        return data.tobytes()
 
     def close(self) -> None:
         if self.closed:
@@ -96,42 +166,43 @@ class PreviewOutput:
         self.server.server_close()
 
     # called by the server's threads ------------------------------------------------------------
-    def state_json(self) -> bytes:
+    def count(self, path: str) -> None:
+        """Requests per page of ours; everything else is one "other" count (bounded)."""
+        key = path if path in PAGES else "other"
         with self._lock:
-            state = dict(self._state)
+            self.requests[key] = self.requests.get(key, 0) + 1
+
+    def state_json(self) -> bytes:
+        """The newest state as JSON, made once per frame (and at most 20 times a second)."""
+        state = self._state
+        cached = self._state_json
+        now = time.monotonic()
+        if cached is not None and (cached[0] == state.get("frame") or now - cached[1] < 0.05) \
+                and not self.closed:
+            return cached[2]
+        state = dict(state)
         session = self.session
         if session is not None:
             report = session.report()
             state["timing"] = report.stages
             state["events"] = report.events[-20:]
             state["wall_seconds"] = report.wall_seconds
+            state["verdict"] = report.verdict()
+            state.update(session.counters())
         state["closed"] = self.closed
-        return json.dumps(_jsonable(state)).encode()
+        body = json.dumps(_jsonable(state)).encode()
+        self._state_json = (state.get("frame"), now, body)
+        return body
 
     def jpeg(self) -> tuple[int, bytes] | None:
-        """(frame number, JPEG bytes) of the newest frame, encoded once per frame."""
-        import cv2
-        with self._lock:
-            frame, number, cached = self._frame, self._frame_number, self._jpeg
-        if frame is None:
-            return None
-        if cached is not None and cached[0] == number:
-            return cached
-        alpha = frame[..., 3:4].astype(np.float32) * (1 / 255)
-        rgb = frame[..., :3].astype(np.float32) * alpha + 40.0 * (1 - alpha)
-        ok, data = cv2.imencode(".jpg", rgb[..., ::-1].astype(np.uint8),
-                                [cv2.IMWRITE_JPEG_QUALITY, self.jpeg_quality])
-        if not ok:
-            raise RuntimeError("JPEG encoding of the preview frame failed")
-        encoded = (number, data.tobytes())
-        with self._lock:
-            self._jpeg = encoded
-        return encoded
+        """(frame number, JPEG bytes) of the newest encoded frame."""
+        return self._jpeg
 
     def wait_frame(self, after: int, timeout: float) -> bool:
         with self._changed:
             return self._changed.wait_for(
-                lambda: self._frame_number > after or self.closed, timeout=timeout)
+                lambda: (self._jpeg is not None and self._jpeg[0] > after) or self.closed,
+                timeout=timeout)
 
 
 class _Handler(BaseHTTPRequestHandler):
@@ -151,8 +222,7 @@ class _Handler(BaseHTTPRequestHandler):
 
     def do_GET(self):  # noqa: N802 (http.server's naming)
         path = self.path.split("?", 1)[0]
-        counts = self.preview.requests
-        counts[path] = counts.get(path, 0) + 1
+        self.preview.count(path)
         try:
             if path in ("/", "/index.html"):
                 self._asset("index.html")
@@ -170,8 +240,8 @@ class _Handler(BaseHTTPRequestHandler):
                 self._stream()
             else:
                 self._send(b"not found", "text/plain", HTTPStatus.NOT_FOUND)
-        except (BrokenPipeError, ConnectionResetError):
-            pass  # the viewer went away
+        except (BrokenPipeError, ConnectionResetError, socket.timeout):
+            pass  # the viewer went away, or stopped reading
 
     def _asset(self, name: str) -> None:
         path = ASSETS / name

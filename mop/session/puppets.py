@@ -201,8 +201,13 @@ class SceneLayer:
         self.scene.add(puppet, look=look)
 
     def render(self, puppet) -> np.ndarray:
-        self.scene.update()
+        # the vertices of the puppet handed in: a session's render worker hands a frozen copy
+        self.scene.update(0, puppet.surface())
         return self.scene.render()
+
+    def release(self) -> None:
+        """Let another thread draw this layer next (see Scene3D.release)."""
+        self.scene.release()
 
     def close(self) -> None:
         try:

@@ -109,3 +109,55 @@ def test_preview_page_shows_follower_state_changing_in_chromium(tmp_path):
     picture = cv2.imdecode(np.frombuffer(jpeg, np.uint8), cv2.IMREAD_COLOR)
     assert picture.shape == (180, 320, 3)
     assert b"--mopframe" in head and b"image/jpeg" in head
+
+
+def get(port, path, timeout=5.0):
+    """(status, body) of one GET over a plain socket (HTTP/1.0: one request per connection)."""
+    import socket
+    with socket.create_connection(("127.0.0.1", port), timeout=timeout) as connection:
+        connection.sendall(f"GET {path} HTTP/1.0\r\n\r\n".encode())
+        data = b""
+        while chunk := connection.recv(65536):
+            data += chunk
+    head, _, body = data.partition(b"\r\n\r\n")
+    return int(head.split()[1]), body
+
+
+@pytest.mark.slow
+def test_preview_server_stays_bounded_under_idle_and_junk_clients():
+    """300 idle connections and 20,000 requests for distinct paths: the threads, the request
+    counts and the time stay bounded, and the page answers again once the idle ones time out."""
+    import socket
+    import threading
+    from mop.session.preview import PAGES, PreviewOutput
+    preview = PreviewOutput(port=0, max_connections=16, timeout=1.0)
+    try:
+        preview.send({"frame": 3, "t": 0.12, "performers": {}, "characters": {}})
+        base = threading.active_count()
+        idle = []
+        for _ in range(300):
+            idle.append(socket.create_connection(("127.0.0.1", preview.port), timeout=5))
+        time.sleep(0.3)
+        assert threading.active_count() <= base + 16 + 2
+        assert preview.server.refused >= 300 - 16 - 64      # the rest were closed at once
+        deadline = time.monotonic() + 5.0                   # idle ones time out after 1 s
+        while True:
+            try:
+                status, body = get(preview.port, "/state.json", timeout=1.0)
+                break
+            except OSError:
+                assert time.monotonic() < deadline, "the server did not recover"
+                time.sleep(0.2)
+        assert status == 200 and json.loads(body)["frame"] == 3
+        for connection in idle:
+            connection.close()
+        started = time.monotonic()
+        for k in range(20_000):
+            status, _ = get(preview.port, f"/junk/{k}")
+            assert status == 404
+        assert time.monotonic() - started < 120
+        assert set(preview.requests) <= set(PAGES) | {"other"}
+        assert preview.requests["other"] == 20_000
+        assert threading.active_count() <= base + 16 + 2
+    finally:
+        preview.close()

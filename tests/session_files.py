@@ -96,3 +96,55 @@ def free_udp_port() -> int:
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
         probe.bind(("127.0.0.1", 0))
         return probe.getsockname()[1]
+
+
+def show_takes(folder: Path, shows: dict, *, seed: int = 4321) -> Path:
+    """A take folder with the demo's takes and show takes made with the demo's generator:
+    shows = {name: (performer, [(action or None for a rest, speed or rest seconds), ...])}.
+    Returns the folder; each show take keeps its script in its metadata ("show")."""
+    import shutil
+
+    import numpy as np
+
+    sys.path.insert(0, str(ROOT / "recordings"))
+    import make_demo_takes as demo
+    from mop.takes import ACTION_STREAM, ActionStream, Take, TakeStore
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    for take in TAKES.glob("*.sqlite"):
+        shutil.copy(take, folder / take.name)
+    store = TakeStore(folder)
+    rng = np.random.default_rng(seed)
+    for name, (performer, script) in shows.items():
+        channels, rate, rest, noise = demo.PERFORMERS[performer]
+        pieces = []
+        for action, amount in script:
+            if action is None:
+                pieces.append(rest + rng.normal(0.0, noise, (int(round(amount * rate)),
+                                                            len(channels))))
+            else:
+                pieces.append(demo.action_stream(action, rng, speed=amount)[1][1:])
+        values = np.concatenate(pieces)
+        stream = ActionStream(np.arange(len(values)) / rate, values, channels, rate=rate,
+                              device={"kind": "synthetic", "performer": performer})
+        steps = [[action or "rest", amount] for action, amount in script]
+        store.save(Take(performer, "show", {ACTION_STREAM: stream}, rate=25.0,
+                        device=f"synthetic:{performer}", extra={"show": steps}),
+                   name=name, overwrite=True)
+    return folder
+
+
+def script_times(performer: str, script) -> list[tuple[str | None, float, float]]:
+    """[(action or None, start [s], end [s])] of a show script as `show_takes` renders it."""
+    sys.path.insert(0, str(ROOT / "recordings"))
+    import make_demo_takes as demo
+    rate = demo.PERFORMERS[performer][1]
+    out, t = [], 0.0
+    for action, amount in script:
+        if action is None:
+            frames = int(round(amount * rate))
+        else:
+            frames = int(round(demo.ACTIONS[action][1] / amount * rate))
+        out.append((action, t, t + frames / rate))
+        t += frames / rate
+    return out

@@ -107,6 +107,12 @@ def test_good_file_is_parsed_into_frozen_typed_objects(tmp_path):
     ('take = "open"', 'tak = "open"', "actions[0].tak", "unknown key"),
     ('channels = { hand = "paw" }', 'channels = ["head"]', "actions[2].channels",
      "already driven by performer 'right'"),
+    ('channels = ["head"]', 'channels = ["head"]\nafter = "freeze"', "actions[2].after",
+     "one of 'rest', 'hold', 'loop'"),
+    ('take = "nod"', 'take = "nod"\nname = "open"', "actions[2].name",
+     "already has an action 'open' from take 'open'"),
+    ('source = "replay:left_show"', 'source = "replay:left_show"\nlatency = 2',
+     "performers.left.latency", "a number in [0, 1]"),
 ])
 def test_malformed_file_names_file_key_and_expectation(tmp_path, old, new, key, expected):
     assert old in GOOD
@@ -135,3 +141,25 @@ def test_not_toml_and_missing_file(tmp_path):
         load_session(write(tmp_path, "[session\nfps = 25"))
     with pytest.raises(FileNotFoundError, match="session file not found"):
         load_session(tmp_path / "nowhere.toml")
+
+
+def test_action_names_after_and_sources_beside_the_session_file(tmp_path):
+    (tmp_path / "clips").mkdir()
+    (tmp_path / "clips" / "hand.mkv").write_bytes(b"")
+    (tmp_path / "glove.toml").write_bytes(b"")
+    text = (GOOD.replace('source = "osc:127.0.0.1:9000/hand"',
+                         'source = "camera:clips/hand.mkv:aruco?ids=3"')
+            .replace('source = "replay:left_show"', 'source = "hid:glove.toml@/dev/hidraw3"')
+            .replace('take = "wave"', 'take = "wave"\nname = "hello"\nafter = "hold"'))
+    config = load_session(write(tmp_path, text))
+    left, right = config.performers
+    assert right.source == f"camera:{(tmp_path / 'clips' / 'hand.mkv').resolve()}:aruco?ids=3"
+    assert left.source == f"hid:{(tmp_path / 'glove.toml').resolve()}@/dev/hidraw3"
+    wave = config.actions[1]
+    assert wave.action == "hello" and wave.after.value == "hold"
+    assert config.actions[0].action == "open" and config.actions[0].after.value == "rest"
+    # a camera index, a missing file and other kinds stay as given
+    other = GOOD.replace('source = "osc:127.0.0.1:9000/hand"', 'source = "camera:0:aruco"')
+    assert load_session(write(tmp_path, other)).performers[1].source == "camera:0:aruco"
+    missing = GOOD.replace('source = "osc:127.0.0.1:9000/hand"', 'source = "camera:gone.mp4"')
+    assert load_session(write(tmp_path, missing)).performers[1].source == "camera:gone.mp4"

@@ -60,6 +60,40 @@ def test_track_relaxes_to_rest_then_lets_go_and_ignores_foreign_actions():
     assert track.current is None
 
 
+def test_hold_keeps_the_end_pose_and_a_new_performance_blends_in_from_it():
+    a = ramp("bend", 0.0, 1.0)
+    track = Track("p", {"a": (a, (("bend", "finger"),))}, {"finger": [0.0]}, blend=0.4,
+                  after={"a": "hold"})
+    out = {}
+    track.update(0.0, FollowState(action="a", progress=0.9), out)
+    for t in (0.04, 1.0, 5.0):                  # the performer stopped: the pose stays
+        out.clear()
+        track.update(t, FollowState(action=None), out)
+        assert out["finger"] == pytest.approx(0.9) and track.mode == "hold"
+    out.clear()
+    track.update(5.2, FollowState(action="a", progress=0.1), out)   # "a" again, from its start
+    w = smoothstep(0.0)
+    assert track.mode == "active" and out["finger"] == pytest.approx((1 - w) * 0.9 + w * 0.1)
+    out.clear()
+    track.update(5.4, FollowState(action="a", progress=0.2), out)
+    w = smoothstep(0.5)
+    assert out["finger"] == pytest.approx((1 - w) * 0.9 + w * 0.2)
+
+
+def test_loop_plays_on_at_the_motions_own_pace_from_where_it_was():
+    a = ramp("bend", 0.0, 1.0, duration=2.0)
+    track = Track("p", {"a": (a, (("bend", "finger"),))}, {"finger": [0.0]}, blend=0.4,
+                  after={"a": "loop"})
+    out = {}
+    track.update(0.0, FollowState(action="a", progress=0.5), out)
+    for k in range(1, 80):                      # 3.2 s on: 1.6 loops of a 2 s motion
+        out.clear()
+        track.update(0.04 * k, FollowState(action=None), out)
+        expected = (0.5 + 0.04 * k / 2.0) % 1.0
+        assert track.mode == "loop" and track.progress == pytest.approx(expected)
+        assert out["finger"] == pytest.approx(expected)
+
+
 def test_zero_blend_cuts_like_mop():
     a, b = ramp("x", 0.0, 1.0), ramp("x", 5.0, 6.0)
     track = Track("p", {"a": (a, (("x", "x"),)), "b": (b, (("x", "x"),))}, {"x": [0.0]},

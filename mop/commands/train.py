@@ -49,8 +49,8 @@ def run(args) -> int:
               f"({', '.join(channels)}), {performer.normalise.value} normalisation, "
               f"bank built in {1e3 * seconds:.1f} ms")
         for name, template in templates.items():
-            drives = [f"{a.character}" for a in config.actions_of(performer.name)
-                      if a.take == name]
+            drives = [a.character for a in config.actions_of(performer.name)
+                      if a.action == name]
             seconds = (template.shape[0] - 1) / config.fps
             print(f"  {name:<16} {template.shape[0]:>4} frames ({seconds:.2f} s at {config.fps} "
                   f"fps) -> {', '.join(drives)}")

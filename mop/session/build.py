@@ -196,7 +196,8 @@ def build_session(config: SessionConfig, *, mode: Mode | str = Mode.REPLAY,
         feed = _feed(spec, performer, store, config, mode=mode, loop=overrides.loop_takes,
                      opener=source_opener, where=where)
         runtime = PerformerRuntime(performer.name, feed, bank, channels=channels, shift=shift,
-                                   scale=scale, actions=tuple(templates))
+                                   scale=scale, actions=tuple(templates),
+                                   still_frames=int(round(performer.still_after * config.fps)))
         performers.append(runtime)
 
     frame_height = config.size[1]

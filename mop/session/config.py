@@ -81,6 +81,7 @@ class PerformerConfig:
     window: int | None = None
     stale_after: float = 0.5
     latency: float = 0.05
+    still_after: float = 0.4
 
 
 @dataclass(frozen=True)
@@ -360,7 +361,8 @@ def parse_session(user: Mapping[str, Any], *, where: str = "<session>",
             sigma=float(sigma) if sigma else None,
             window=int(window) if window else None,
             stale_after=float(entry.number("stale_after", low=0.01, high=60.0)),
-            latency=float(entry.number("latency", low=0.0, high=1.0))))
+            latency=float(entry.number("latency", low=0.0, high=1.0)),
+            still_after=float(entry.number("still_after", low=0.0, high=60.0))))
 
     characters = []
     table = top.sub("characters")

@@ -68,15 +68,24 @@ class FollowState:
                 "log_likelihood": self.log_likelihood, "fit": self.fit}
 
 
+# A shown action whose progress moved less than this in the still window has stopped: chosen on
+# the demo's action takes alone, played at 0.5x-2x between rests made of their own end frames
+# and noise level: the followers' progress advanced at least 0.038 in 0.4 s during a gesture,
+# at most 0.015 once the gesture had ended.
+STILL_PROGRESS = 0.03
+
+
 class PerformerRuntime:
     """One performer: feed -> channel selection -> normalisation -> follower bank.
 
     channels : the D channel names the bank expects, picked by name from the feed's channels
     (empty = the feed's channels as they come); shift, scale : (D,) float, so the bank sees
-    x = (values[selected] - shift) / scale."""
+    x = (values[selected] - shift) / scale; still_frames : a shown action whose progress moved
+    less than STILL_PROGRESS over this many frames is shown as no action (the performer stopped;
+    0 = never)."""
 
     def __init__(self, name: str, feed, bank, *, channels: Sequence[str] = (), shift=None,
-                 scale=None, actions: Sequence[str] = ()):
+                 scale=None, actions: Sequence[str] = (), still_frames: int = 0):
         self.name = name
         self.feed = feed
         self.bank = bank
@@ -97,6 +106,9 @@ class PerformerRuntime:
         self._x = np.empty(len(self.channels))
         self._following = False
         self._last = None
+        self.still = False
+        self._recent_progress = np.zeros(max(int(still_frames), 0))
+        self._recent_action = np.zeros(max(int(still_frames), 0), dtype=np.int64)
 
     def _selection(self) -> np.ndarray | None:
         """Indices of the wanted channels in the feed's (resolved again when they change: a
@@ -136,6 +148,7 @@ class PerformerRuntime:
                 self.bank.reset()
                 self._following = False
                 self.steps = 0
+            self.still = False
             self.state = FollowState()
             return
         try:
@@ -149,14 +162,30 @@ class PerformerRuntime:
         self._following = True
         self.steps += 1
         self._last = out
+        self.still = self._stopped(out)
         state = self.state
-        state.action = out.action
+        state.action = None if self.still else out.action
         state.progress = float(out.progress)
         state.variance = float(out.variance)
         state.log_likelihood = float(out.log_likelihood)
         state.fit = float(getattr(out, "fit", 0.0))
         if out.action is not None:
             self.seen.add(out.action)
+
+    def _stopped(self, out) -> bool:
+        """True when the bank has shown the same action over the still window and its
+        progress moved less than STILL_PROGRESS: the performer stopped (or holds the end)."""
+        window = self._recent_progress.size
+        if window == 0:
+            return False
+        slot = (self.steps - 1) % window
+        self._recent_progress[slot] = out.progress
+        self._recent_action[slot] = -1 if out.action is None else int(getattr(out, "index", 0))
+        if self.steps < window or out.action is None:
+            return False
+        actions, progress = self._recent_action, self._recent_progress
+        return bool(actions.min() == actions.max()
+                    and progress.max() - progress.min() < STILL_PROGRESS)
 
     def posterior(self) -> dict[str, float]:
         """{action: probability} from the bank's last step (empty while not following)."""
@@ -554,6 +583,7 @@ class Session:
             "performers": {p.name: {"status": "failed" if p.problem else p.status,
                                     "message": p.problem or p.feed.message,
                                     "input_frame": p.steps - 1 if p.steps else None,
+                                    "still": p.still,
                                     **p.state.as_dict(), "posterior": p.posterior()}
                            for p in self.performers},
             "characters": {c.name: {

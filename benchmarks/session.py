@@ -13,7 +13,7 @@ to the puppets holding the pose it asked for). Two character mixes:
 
 Plain reference, same process: the same banks and puppets stepped in a bare loop (no feeds, no
 blending, no bookkeeping); "overhead" is the session frame minus that reference, i.e. what the
-session itself adds. Targets (issue 6): 4x8 frame without rendering <= 10 ms on one core;
+session itself adds. Targets: 4x8 frame without rendering <= 10 ms on one core;
 input-to-pose latency well under MOP's 11.4 ms.
 """
 from __future__ import annotations

@@ -119,6 +119,8 @@ def get(port, path, timeout=5.0):
         data = b""
         while chunk := connection.recv(65536):
             data += chunk
+    if not data:
+        raise ConnectionResetError("the server closed the connection without an answer")
     head, _, body = data.partition(b"\r\n\r\n")
     return int(head.split()[1]), body
 

@@ -1,4 +1,4 @@
-"""Benchmark of the elastic simulation core (issue 3): frame times, accuracy, force pass.
+"""Benchmark of the elastic simulation core: frame times, accuracy, force pass.
 
     python3 benchmarks/sim.py                 # everything (~15-25 min on a loaded 2-core box)
     python3 benchmarks/sim.py --quick         # smaller run: no 30k mesh, 1 min long run

@@ -124,13 +124,7 @@ def confusability_report(templates: dict, new_name: str) -> list[str]:
     if len(templates) < 2:
         return ["confusability: this is the performer's first take on these channels; nothing "
                 "to compare yet"]
-    try:
-        from followers import confusability
-    except ImportError:
-        # followers.confusability is written by the followers teammate; an install without it
-        # still records, and the comparison can be made later with `mop train`
-        return ["confusability: followers.confusability is not available in this install; "
-                "the take is stored, compare later with `mop train`"]
+    from followers import confusability
     stacked = np.concatenate(list(templates.values()), axis=0)
     shift = np.nanmean(stacked, axis=0)
     scale = np.nanstd(stacked, axis=0)

@@ -11,8 +11,9 @@ Sections:
    the paper's update times (1.7 GHz Pentium 4).
 2. The shipped frog built at 2k..20k masses (its real springs): build time and ms per frame
    while the glove opens and closes the mouth.
-3. Rendering the deformed 40k-triangle frog at 720x576 (pyrender, EGL/llvmpipe): per-frame
-   buffer update vs rebuilding the mesh, multisampling on/off, pyrender's stock read-back; and
+3. Rendering the deformed 40k-triangle frog at 720x576 (mop.render.scene3d: OpenGL through
+   moderngl, EGL/llvmpipe): per-frame buffer update vs rebuilding the mesh's buffers,
+   multisampling on/off, and pyrender's stock offscreen renderer as an outside reference; and
    simulation + rendering per frame, one after the other and pipelined on two threads.
 4. Decimation (section 4.1) against plain quadric decimation (fast-simplification): triangle
    roundness and Hausdorff distance.
@@ -202,16 +203,12 @@ def rendering(puppet: LatexPuppet, frames: int) -> None:
                 t0 = time.perf_counter()
                 if mode == "update":
                     scene.update(handle, x)
-                else:  # rebuild: a new pyrender mesh every frame (what the scene avoids)
+                else:  # rebuild: new GPU buffers every frame (what the scene avoids)
                     item = scene._items[handle]
-                    scene._scene.remove_node(next(iter(scene._scene.get_nodes(obj=item.mesh))))
                     item.refresh(x)
-                    item.primitive = pyrender.Primitive(
-                        positions=item.buffer[:, :3], normals=item.buffer[:, 3:6],
-                        color_0=item.buffer[:, 6:10] if item.buffer.shape[1] > 6 else None,
-                        indices=item.faces.astype(np.uint32), material=item.primitive.material)
-                    item.mesh = pyrender.Mesh([item.primitive])
-                    scene._scene.add(item.mesh)
+                    with scene._context:
+                        item.release()
+                        item.upload(scene._context, scene._program)
                 scene.render()
                 times.append(time.perf_counter() - t0)
         return times[2:]

@@ -140,7 +140,7 @@ def main() -> None:
     parser.add_argument("--frames", type=int, default=150)
     parser.add_argument("--mix", default="image,demo", help="image, demo or both")
     parser.add_argument("--render", action="store_true",
-                        help="also render (pyrender for 3D kinds: slow without a GPU)")
+                        help="also render (OpenGL for 3D kinds: slow without a GPU)")
     parser.add_argument("--cores", type=int, default=1, help="CPU cores to run on (default 1)")
     args = parser.parse_args()
     if hasattr(os, "sched_setaffinity") and args.cores:

@@ -2,7 +2,7 @@
 and the three puppet kinds (image, latex, medial).
 
 Names are resolved lazily so that importing one puppet kind never pulls in the heavy
-dependencies of another (trimesh, OpenCV, pyrender)."""
+dependencies of another (trimesh, OpenCV)."""
 import lazy_loader
 
 __getattr__, __dir__, __all__ = lazy_loader.attach(__name__, submod_attrs={

@@ -10,7 +10,7 @@ want_tests=0
 [ "${1:-}" = "--test" ] && want_tests=1
 
 apt_packages=(python3-venv python3-dev build-essential
-              libegl1 libgl1 libegl-mesa0 libgl1-mesa-dri libgles2)   # pyrender offscreen via EGL
+              libegl1 libgl1 libegl-mesa0 libgl1-mesa-dri libgles2)   # offscreen OpenGL via EGL
 if [ "$want_tests" = 1 ]; then
     apt_packages+=(umockdev libumockdev-dev    # a HID device simulated in user space for end-to-end tests
                    libevdev2                   # loaded by hid-tools (the kernel's emulated gamepads)

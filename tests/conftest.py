@@ -1,18 +1,12 @@
 """Shared test set-up.
 
-- Offscreen OpenGL: pyrender must see PYOPENGL_PLATFORM=egl before anything imports OpenGL.
 - Seeds: every random test takes `rng` (or `seed`); the seed comes from MOP_TEST_SEED
   (default 12345) and is printed in the header so a failure can be replayed.
 """
 import os
 
-os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
-
 import numpy as np
 import pytest
-
-if not hasattr(np, "infty"):  # pyrender 0.1.45 still uses np.infty, removed in NumPy 2
-    np.infty = np.inf
 
 SEED = int(os.environ.get("MOP_TEST_SEED", "12345"))
 

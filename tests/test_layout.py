@@ -58,8 +58,8 @@ LAYERS = {
     ],
 }
 
-HEAVY = ("cv2", "pyrender", "trimesh", "hid", "hidraw", "matplotlib", "hmmlearn", "mediapipe",
-         "OpenGL")
+HEAVY = ("cv2", "pyrender", "moderngl", "trimesh", "hid", "hidraw", "matplotlib", "hmmlearn",
+         "mediapipe", "OpenGL")
 
 
 def _module_name(path: Path) -> str:

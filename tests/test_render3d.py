@@ -3,7 +3,7 @@ scene rebuilt from scratch, normals against a NumPy reference, and closing."""
 import numpy as np
 import pytest
 
-pytest.importorskip("pyrender")
+pytest.importorskip("moderngl")
 trimesh = pytest.importorskip("trimesh")
 
 from mop.render.scene3d import Scene3D, parse_background, vertex_normals  # noqa: E402

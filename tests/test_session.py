@@ -53,8 +53,8 @@ def test_two_performers_three_characters_replayed_twice_give_identical_frames(tm
     # what the followers said, every target, every puppet's geometry: bit for bit the same
     assert log_a.states == log_b.states
     assert log_a.surfaces == log_b.surfaces
-    # the pictures, 2D and 3D layers composed: byte for byte (pyrender's light and mesh order is
-    # pinned by mop.render.scene3d, otherwise a stray pixel may round one level differently)
+    # the pictures, 2D and 3D layers composed: byte for byte (mop.render.scene3d draws meshes
+    # and sums lights in a fixed order, otherwise a stray pixel may round one level differently)
     differing = [k for k, (a, b) in enumerate(zip(log_a.frames, log_b.frames))
                  if not np.array_equal(a, b)]
     assert differing == []

@@ -1,4 +1,5 @@
-"""Offscreen 3D rendering of deformable puppets with pyrender (EGL, no display, no GPU needed).
+"""Offscreen 3D rendering of deformable puppets with OpenGL through moderngl (EGL: no display,
+no GPU needed; Mesa's llvmpipe rasterises in software).
 
     with Scene3D(size=(720, 576), camera="three_quarter", background="chroma") as scene:
         scene.add(puppet)                  # anything with surface() -> (V, 3) and faces (F, 3)
@@ -7,74 +8,108 @@
             scene.update()                 # new vertex positions (and normals) only
             rgba = scene.render()          # (H, W, 4) uint8, straight alpha
 
-The scene (meshes, material, lights, camera) is built once; per frame only the vertex buffer
-of each mesh is rewritten in place (glBufferSubData of positions + normals), never rebuilt.
-The renderer is pyrender's, with two changes that matter on a software rasteriser (Mesa
-llvmpipe): the frame is read back as colour only (pyrender also reads and converts depth),
-and multisampling is optional (`antialias=True` for stills, off by default for live frames);
-see benchmarks/latex_puppet.py for the measured effect. Close the scene (or use `with`) to free
-the OpenGL context.
+The scene (meshes, materials, lights, camera) is built once; per frame only the vertex buffer
+of each mesh is rewritten in place, never rebuilt. Meshes are drawn in the order they were
+added, so the same input gives the same pixels on every run. Shading is the glTF 2.0
+metallic-roughness model (GGX distribution, Schlick-GGX geometry, Schlick Fresnel) under
+directional lights and an ambient term, written out with a 2.2 gamma. Multisampling is optional
+(`antialias=True` for stills, off by default for live frames: on a software rasteriser it more
+than doubles a frame's cost). Each scene owns its OpenGL context, made current around every
+call, so a scene may be used from any thread (one at a time). Close the scene (or use `with`)
+to free it.
 
 Backgrounds: "transparent" (alpha 0 around the puppet), "chroma" (pure key green, opaque, for a
 vision mixer's chroma keyer), "blue" (key blue), "#rrggbb" or (r, g, b) in 0..255.
 """
 from __future__ import annotations
 
-import os
 import threading
+from dataclasses import dataclass
 
-# pyrender picks its OpenGL platform when OpenGL is first imported: EGL works headless.
-os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
+import numpy as np
+from numba import njit
 
-from dataclasses import dataclass  # noqa: E402
+from mop import export
 
-import numpy as np  # noqa: E402
-from numba import njit  # noqa: E402
-
-from mop import export  # noqa: E402
-
-if not hasattr(np, "infty"):  # pyrender 0.1.45 still uses np.infty, removed in NumPy 2
-    np.infty = np.inf
-
-try:  # noqa: E402
-    import pyrender
-    from OpenGL import GL
-    from pyrender.renderer import Renderer as _PyrenderRenderer
+try:
+    import moderngl
 except ImportError as _error:  # pragma: no cover - depends on the environment
-    raise ImportError("3D rendering needs pyrender: pip install 'mop[render3d]'") from _error
+    raise ImportError("3D rendering needs moderngl: pip install 'mop[render3d]'") from _error
 
 
 _JIT = dict(cache=True, nogil=True, error_model="numpy")
+_STRIDE = 10          # floats per vertex in the buffer: position (3), normal (3), colour (4)
+_MAX_LIGHTS = 3
+
+_VERTEX_SHADER = """
+#version 330
+uniform mat4 view_projection;
+in vec3 in_position;
+in vec3 in_normal;
+in vec4 in_color;
+out vec3 v_position;
+out vec3 v_normal;
+out vec4 v_color;
+void main() {
+    v_position = in_position;
+    v_normal = in_normal;
+    v_color = in_color;
+    gl_Position = view_projection * vec4(in_position, 1.0);
+}
+"""
+
+# glTF 2.0 metallic-roughness: a Lambert diffuse lobe and a GGX specular lobe with Schlick's
+# Fresnel term and the Schlick-GGX geometry term with k = (roughness + 1)^2 / 8 (the common
+# real-time choice for direct light), in linear light, written out with a 2.2 gamma. Vertex
+# colours multiply the lit colour rather than the base colour: a painted pupil stays matte.
+_FRAGMENT_SHADER = """
+#version 330
+const float PI = 3.141592653589793;
+uniform vec3 camera_position;
+uniform vec4 base_color_factor;
+uniform float metallic;
+uniform float roughness;
+uniform int light_count;
+uniform vec3 light_direction[3];     // unit vectors from the surface towards each light
+uniform vec3 light_radiance[3];      // colour x intensity
+uniform vec3 ambient;
+in vec3 v_position;
+in vec3 v_normal;
+in vec4 v_color;
+out vec4 frag_color;
+
+void main() {
+    vec4 base = base_color_factor;
+    vec3 n = normalize(v_normal);
+    vec3 v = normalize(camera_position - v_position);
+    float perceptual = clamp(roughness, 0.04, 1.0);
+    float alpha2 = pow(perceptual, 4.0);
+    float k = (perceptual + 1.0) * (perceptual + 1.0) / 8.0;
+    vec3 f0 = mix(vec3(0.04), base.rgb, metallic);
+    vec3 diffuse_color = mix(base.rgb * (1.0 - 0.04), vec3(0.0), metallic);
+    float n_dot_v = clamp(abs(dot(n, v)), 0.001, 1.0);
+    vec3 color = vec3(0.0);
+    for (int i = 0; i < light_count; ++i) {
+        vec3 l = light_direction[i];
+        vec3 h = normalize(l + v);
+        float n_dot_l = clamp(dot(n, l), 0.001, 1.0);
+        float n_dot_h = clamp(dot(n, h), 0.0, 1.0);
+        float v_dot_h = clamp(dot(v, h), 0.0, 1.0);
+        vec3 fresnel = f0 + (1.0 - f0) * pow(1.0 - v_dot_h, 5.0);
+        float geometry = n_dot_v / (n_dot_v * (1.0 - k) + k) * n_dot_l / (n_dot_l * (1.0 - k) + k);
+        float d = n_dot_h * n_dot_h * (alpha2 - 1.0) + 1.0;
+        float distribution = alpha2 / (PI * d * d);
+        vec3 diffuse = (1.0 - fresnel) * diffuse_color / PI;
+        vec3 specular = fresnel * geometry * distribution / (4.0 * n_dot_l * n_dot_v + 0.001);
+        color += n_dot_l * light_radiance[i] * (diffuse + specular);
+    }
+    color += ambient * base.rgb;
+    color *= v_color.rgb;            // vertex colours tint the lit surface, highlights included
+    frag_color = clamp(vec4(pow(color, vec3(1.0 / 2.2)), base.a * v_color.a), 0.0, 1.0);
+}
+"""
 
 
-class _OrderedScene(pyrender.Scene):
-    """A pyrender scene that hands meshes and lights to the renderer in the order they were
-    added. pyrender keeps them in sets, whose order follows object ids and so changes from run to
-    run; the shader then sums the lights in another order and a few pixels round one level
-    differently, which breaks byte-identical replays."""
-
-    def __init__(self, **kwargs):
-        self._added = {}
-        super().__init__(**kwargs)
-
-    def add_node(self, node, parent_node=None):
-        self._added.setdefault(node, len(self._added))
-        super().add_node(node, parent_node=parent_node)
-
-    def remove_node(self, node):
-        super().remove_node(node)
-        self._added.pop(node, None)
-
-    def _ordered(self, nodes):
-        return sorted(nodes, key=lambda n: self._added.get(n, -1))
-
-    @property
-    def mesh_nodes(self):
-        return self._ordered(super().mesh_nodes)
-
-    @property
-    def light_nodes(self):
-        return self._ordered(super().light_nodes)
 
 
 @dataclass(frozen=True)
@@ -108,8 +143,8 @@ CAMERAS = {
 }
 
 def parse_background(background) -> tuple[float, float, float, float]:
-    """Anything `mop.export.parse_background` takes -> pyrender's (r, g, b, a) in 0..1
-    (transparent: alpha 0)."""
+    """Anything `mop.export.parse_background` takes -> (r, g, b, a) in 0..1 (transparent:
+    alpha 0)."""
     rgb = export.parse_background(background)
     if rgb is None:
         return (0.0, 0.0, 0.0, 0.0)
@@ -145,135 +180,31 @@ def vertex_normals(x, faces, out):
 
 @njit(**_JIT)
 def _pack_vertices(x, normals, buffer):
-    """Write positions and normals into the interleaved float32 vertex buffer (V, stride)."""
+    """Write positions and normals into the interleaved float32 vertex buffer (V, _STRIDE)."""
     for i in range(x.shape[0]):
         for k in range(3):
             buffer[i, k] = x[i, k]
             buffer[i, 3 + k] = normals[i, k]
 
 
-class _LeanRenderer(_PyrenderRenderer):
-    """pyrender's renderer reading back colour only, with a configurable multisample count."""
-
-    samples = 0
-
-    def _configure_main_framebuffer(self):
-        if self._main_fb is not None and (self.viewport_width != self._main_fb_dims[0]
-                                          or self.viewport_height != self._main_fb_dims[1]):
-            self._delete_main_framebuffer()
-        if self._main_fb is not None:
-            return
-        width, height = self.viewport_width, self.viewport_height
-        self._main_cb, self._main_db = GL.glGenRenderbuffers(2)
-        GL.glBindRenderbuffer(GL.GL_RENDERBUFFER, self._main_cb)
-        GL.glRenderbufferStorage(GL.GL_RENDERBUFFER, GL.GL_RGBA, width, height)
-        GL.glBindRenderbuffer(GL.GL_RENDERBUFFER, self._main_db)
-        GL.glRenderbufferStorage(GL.GL_RENDERBUFFER, GL.GL_DEPTH_COMPONENT24, width, height)
-        self._main_fb = GL.glGenFramebuffers(1)
-        GL.glBindFramebuffer(GL.GL_DRAW_FRAMEBUFFER, self._main_fb)
-        GL.glFramebufferRenderbuffer(GL.GL_DRAW_FRAMEBUFFER, GL.GL_COLOR_ATTACHMENT0,
-                                     GL.GL_RENDERBUFFER, self._main_cb)
-        GL.glFramebufferRenderbuffer(GL.GL_DRAW_FRAMEBUFFER, GL.GL_DEPTH_ATTACHMENT,
-                                     GL.GL_RENDERBUFFER, self._main_db)
-        if self.samples == 0:
-            # no multisampling: draw straight into the framebuffer that is read back (saves a
-            # full-frame blit); pyrender draws into _main_fb_ms
-            self._main_fb_ms, self._main_cb_ms, self._main_db_ms = (
-                self._main_fb, self._main_cb, self._main_db)
-            self._main_fb_dims = (width, height)
-            return
-        self._main_cb_ms, self._main_db_ms = GL.glGenRenderbuffers(2)
-        GL.glBindRenderbuffer(GL.GL_RENDERBUFFER, self._main_cb_ms)
-        GL.glRenderbufferStorageMultisample(GL.GL_RENDERBUFFER, self.samples, GL.GL_RGBA,
-                                            width, height)
-        GL.glBindRenderbuffer(GL.GL_RENDERBUFFER, self._main_db_ms)
-        GL.glRenderbufferStorageMultisample(GL.GL_RENDERBUFFER, self.samples,
-                                            GL.GL_DEPTH_COMPONENT24, width, height)
-        self._main_fb_ms = GL.glGenFramebuffers(1)
-        GL.glBindFramebuffer(GL.GL_DRAW_FRAMEBUFFER, self._main_fb_ms)
-        GL.glFramebufferRenderbuffer(GL.GL_DRAW_FRAMEBUFFER, GL.GL_COLOR_ATTACHMENT0,
-                                     GL.GL_RENDERBUFFER, self._main_cb_ms)
-        GL.glFramebufferRenderbuffer(GL.GL_DRAW_FRAMEBUFFER, GL.GL_DEPTH_ATTACHMENT,
-                                     GL.GL_RENDERBUFFER, self._main_db_ms)
-        self._main_fb_dims = (width, height)
-
-    def _delete_main_framebuffer(self):
-        if self.samples == 0 and self._main_fb is not None:
-            GL.glDeleteFramebuffers(1, [self._main_fb])
-            GL.glDeleteRenderbuffers(2, [self._main_cb, self._main_db])
-            self._main_fb = self._main_cb = self._main_db = None
-            self._main_fb_ms = self._main_cb_ms = self._main_db_ms = None
-            self._main_fb_dims = (None, None)
-            return
-        super()._delete_main_framebuffer()
-
-    def _read_main_framebuffer(self, scene, flags):
-        width, height = self._main_fb_dims
-        if self._main_fb_ms != self._main_fb:  # resolve the multisampled frame
-            GL.glBindFramebuffer(GL.GL_READ_FRAMEBUFFER, self._main_fb_ms)
-            GL.glBindFramebuffer(GL.GL_DRAW_FRAMEBUFFER, self._main_fb)
-            GL.glBlitFramebuffer(0, 0, width, height, 0, 0, width, height,
-                                 GL.GL_COLOR_BUFFER_BIT, GL.GL_LINEAR)
-        GL.glBindFramebuffer(GL.GL_READ_FRAMEBUFFER, self._main_fb)
-        data = GL.glReadPixels(0, 0, width, height, GL.GL_RGBA, GL.GL_UNSIGNED_BYTE)
-        image = np.frombuffer(data, dtype=np.uint8).reshape(height, width, 4)
-        return image[::-1], None
-
-
-class _Offscreen(pyrender.OffscreenRenderer):
-    """pyrender's offscreen renderer with the lean renderer, and a delete() that keeps the EGL
-    display alive while other scenes of the process still use it (pyrender terminates the
-    shared display, which breaks every other open context)."""
-
-    _open = 0
-    _lock = threading.Lock()
-
-    def __init__(self, width, height, samples):
-        self._samples = samples
-        super().__init__(width, height)
-
-    def _create(self):
-        super()._create()
-        self._renderer.delete()
-        self._renderer = _LeanRenderer(self.viewport_width, self.viewport_height)
-        self._renderer.samples = self._samples
-        with _Offscreen._lock:
-            _Offscreen._open += 1
-
-    def delete(self):
-        platform = self._platform
-        if platform is None:
-            return
-        platform.make_current()
-        self._renderer.delete()
-        with _Offscreen._lock:
-            _Offscreen._open -= 1
-            last = _Offscreen._open == 0
-        if last or not hasattr(platform, "_egl_display"):
-            platform.delete_context()
-        else:
-            from OpenGL.EGL import EGL_NO_CONTEXT, EGL_NO_SURFACE, eglDestroyContext, eglMakeCurrent
-            eglMakeCurrent(platform._egl_display, EGL_NO_SURFACE, EGL_NO_SURFACE, EGL_NO_CONTEXT)
-            eglDestroyContext(platform._egl_display, platform._egl_context)
-            platform._egl_context = None
-            platform._egl_display = None  # so the platform's __del__ does not terminate it
-        self._renderer = None
-        self._platform = None
-
-
 class _Item:
-    """One mesh in the scene and the buffers its per-frame update reuses."""
+    """One mesh in the scene: its buffers on the CPU (reused every frame) and on the GPU."""
 
     def __init__(self, source, faces, colors, look: Look, name: str):
         self.source = source
         self.faces = np.ascontiguousarray(faces, dtype=np.int64)
+        self.look = look
         self.name = name
         positions = self._positions()
+        if self.faces.ndim != 2 or self.faces.shape[1] != 3 or (
+                self.faces.size and (self.faces.min() < 0 or self.faces.max() >= len(positions))):
+            raise ValueError(f"{name}: faces must be (F, 3) indices into {len(positions)} "
+                             f"vertices, got shape {self.faces.shape}")
         self.normals = np.empty_like(positions)
         vertex_normals(positions, self.faces, self.normals)
-        kwargs = dict(positions=positions.astype(np.float32),
-                      normals=self.normals.astype(np.float32),
-                      indices=self.faces.astype(np.uint32))
+        self.buffer = np.ones((len(positions), _STRIDE), dtype=np.float32)
+        self.buffer[:, :3] = positions
+        self.buffer[:, 3:6] = self.normals
         if colors is not None and look.use_vertex_colors:
             colors = np.asarray(colors)
             if colors.shape != (len(positions), 4) and colors.shape != (len(positions), 3):
@@ -282,22 +213,25 @@ class _Item:
             rgba = np.ones((len(positions), 4), dtype=np.float32)
             scale = 255.0 if colors.dtype == np.uint8 else 1.0
             rgba[:, :colors.shape[1]] = colors / scale
-            # pyrender's shader takes vertex colours as linear: undo the sRGB encoding
+            # the shader works in linear light: undo the colours' sRGB encoding
             rgba[:, :3] = np.where(rgba[:, :3] <= 0.04045, rgba[:, :3] / 12.92,
                                    ((rgba[:, :3] + 0.055) / 1.055) ** 2.4)
-            kwargs["color_0"] = rgba
-        material = pyrender.MetallicRoughnessMaterial(
-            baseColorFactor=(*look.base_color, 1.0), metallicFactor=look.metallic,
-            roughnessFactor=look.roughness, doubleSided=look.double_sided)
-        self.primitive = pyrender.Primitive(material=material, **kwargs)
-        self.mesh = pyrender.Mesh([self.primitive], name=name)
-        stride = 6 + (4 if "color_0" in kwargs else 0)
-        self.buffer = np.zeros((len(positions), stride), dtype=np.float32)
-        self.buffer[:, :3] = positions
-        self.buffer[:, 3:6] = self.normals
-        if "color_0" in kwargs:
-            self.buffer[:, 6:10] = kwargs["color_0"]
+            self.buffer[:, 6:10] = rgba
         self.rest_bounds = np.stack([positions.min(0), positions.max(0)])
+        self.vbo = self.ibo = self.vao = None
+
+    def upload(self, context, program) -> None:
+        self.vbo = context.buffer(self.buffer)
+        self.ibo = context.buffer(self.faces.astype(np.uint32))
+        self.vao = context.vertex_array(
+            program, [(self.vbo, "3f 3f 4f", "in_position", "in_normal", "in_color")],
+            index_buffer=self.ibo, index_element_size=4)
+
+    def release(self) -> None:
+        for resource in (self.vao, self.vbo, self.ibo):
+            if resource is not None:
+                resource.release()
+        self.vbo = self.ibo = self.vao = None
 
     def _positions(self, vertices=None) -> np.ndarray:
         if vertices is None:
@@ -316,8 +250,29 @@ class _Item:
         _pack_vertices(x, self.normals, self.buffer)
 
 
+def _perspective(yfov: float, aspect: float, znear: float, zfar: float) -> np.ndarray:
+    """OpenGL projection (4, 4) of a perspective camera (the glTF 2.0 camera model)."""
+    t = np.tan(yfov / 2.0)
+    projection = np.zeros((4, 4))
+    projection[0, 0] = 1.0 / (aspect * t)
+    projection[1, 1] = 1.0 / t
+    projection[2, 2] = (zfar + znear) / (znear - zfar)
+    projection[2, 3] = 2.0 * zfar * znear / (znear - zfar)
+    projection[3, 2] = -1.0
+    return projection
+
+
+def _open_context():
+    try:
+        return moderngl.create_context(standalone=True, backend="egl", require=330)
+    except Exception as error:
+        raise RuntimeError(
+            f"3D rendering could not open an offscreen OpenGL context through EGL ({error}); "
+            f"on Debian: apt-get install libegl1 libgl1 libegl-mesa0 libgl1-mesa-dri") from None
+
+
 def _look_at(eye: np.ndarray, target: np.ndarray) -> np.ndarray:
-    """Camera pose (4, 4): camera at eye looking at target, +y up (pyrender looks along -z)."""
+    """Camera pose (4, 4): camera at eye looking at target, +y up (OpenGL looks along -z)."""
     forward = target - eye
     forward /= np.linalg.norm(forward)
     up = np.array([0.0, 1.0, 0.0])
@@ -335,11 +290,11 @@ def _look_at(eye: np.ndarray, target: np.ndarray) -> np.ndarray:
 
 
 class Scene3D:
-    """A pyrender scene built once; meshes' vertices change per frame.
+    """A scene built once; meshes' vertices change per frame.
 
     size : (width, height) [px]; camera : a CAMERAS name or a (4, 4) camera pose;
-    background : see `parse_background`; antialias : 4x multisampling
-    (slower on software rasterisers); yfov : vertical field of view [rad];
+    background : see `parse_background`; antialias : 4x multisampling (slower on software
+    rasterisers); yfov : vertical field of view [rad];
     lights : "studio" (key, fill, rim directional lights) or "flat" (one headlight).
     """
 
@@ -361,12 +316,27 @@ class Scene3D:
         self._camera_choice = camera
         self._lights = lights
         self._yfov = float(yfov)
-        self._scene = _OrderedScene(bg_color=self.background, ambient_light=(0.28, 0.28, 0.3))
+        self._ambient = (0.28, 0.28, 0.3)
         self._items: list[_Item] = []
-        self._camera_node = None
-        self._light_nodes = []
-        self._renderer = _Offscreen(width, height, 4 if antialias else 0)
-        self._frames = 0
+        self._framed = False
+        self._lock = threading.Lock()
+        self._context = _open_context()
+        with self._context:
+            self._program = self._context.program(vertex_shader=_VERTEX_SHADER,
+                                                  fragment_shader=_FRAGMENT_SHADER)
+            self._program["ambient"].value = self._ambient
+            self._target = self._context.framebuffer(
+                color_attachments=[self._context.renderbuffer((width, height), 4)],
+                depth_attachment=self._context.depth_renderbuffer((width, height)))
+            self._drawn = self._target
+            if antialias:
+                samples = min(4, self._context.max_samples)
+                self._drawn = self._context.framebuffer(
+                    color_attachments=[self._context.renderbuffer((width, height), 4,
+                                                                  samples=samples)],
+                    depth_attachment=self._context.depth_renderbuffer((width, height),
+                                                                      samples=samples))
+        self._pixels = np.empty((height, width, 4), np.uint8)
 
     # --- building ----------------------------------------------------------------------------
     def add(self, item, faces=None, *, colors=None, look="latex", name: str | None = None) -> int:
@@ -388,14 +358,16 @@ class Scene3D:
                 colors = getattr(item, "vertex_colors", None)
         name = name or f"mesh{len(self._items)}"
         entry = _Item(item, faces, colors, look, name)
-        self._scene.add(entry.mesh, name=name)
+        with self._lock, self._context:
+            entry.upload(self._context, self._program)
         self._items.append(entry)
-        if self._camera_node is None:
+        if not self._framed:
             self.frame()
         return len(self._items) - 1
 
     def frame(self, bounds: np.ndarray | None = None, *, margin: float = 1.15) -> None:
         """Point the camera (and the lights) at bounds (2, 3) [m], default all meshes at rest."""
+        self._check_open()
         if bounds is None:
             if not self._items:
                 raise ValueError("nothing to frame: add a mesh first or pass bounds")
@@ -413,24 +385,32 @@ class Scene3D:
             pose = _look_at(centre + direction * distance, centre)
         else:
             pose = np.asarray(self._camera_choice, dtype=np.float64)
-        camera = pyrender.PerspectiveCamera(yfov=self._yfov, aspectRatio=aspect,
-                                            znear=distance * 0.05, zfar=distance * 4)
-        if self._camera_node is not None:
-            self._scene.remove_node(self._camera_node)
-        for node in self._light_nodes:
-            self._scene.remove_node(node)
-        self._camera_node = self._scene.add(camera, pose=pose)
-        self._light_nodes = []
+        projection = _perspective(self._yfov, aspect, distance * 0.05, distance * 4)
+        view_projection = projection @ np.linalg.inv(pose)
+        # a directional light shines along -z of its pose: the surface sees it along +z
         if self._lights == "flat":
-            self._light_nodes.append(self._scene.add(
-                pyrender.DirectionalLight(intensity=3.0), pose=pose))
-            return
-        for offset, intensity in (((0.5, 0.6, 0.0), 3.2), ((-0.7, 0.1, 0.0), 1.2),
-                                  ((0.0, 0.5, -1.6), 2.0)):
-            eye = pose[:3, 3] + pose[:3, :3] @ (np.asarray(offset) * distance)
-            self._light_nodes.append(self._scene.add(
-                pyrender.DirectionalLight(color=(1.0, 0.97, 0.92), intensity=intensity),
-                pose=_look_at(eye, centre)))
+            lights = [(pose[:3, 2], (3.0, 3.0, 3.0))]
+        else:
+            lights = []
+            for offset, intensity in (((0.5, 0.6, 0.0), 3.2), ((-0.7, 0.1, 0.0), 1.2),
+                                      ((0.0, 0.5, -1.6), 2.0)):
+                eye = pose[:3, 3] + pose[:3, :3] @ (np.asarray(offset) * distance)
+                radiance = tuple(intensity * c for c in (1.0, 0.97, 0.92))
+                lights.append((_look_at(eye, centre)[:3, 2], radiance))
+        directions = np.zeros((_MAX_LIGHTS, 3), np.float32)
+        radiances = np.zeros((_MAX_LIGHTS, 3), np.float32)
+        for index, (direction, radiance) in enumerate(lights):
+            directions[index] = direction
+            radiances[index] = radiance
+        with self._lock, self._context:
+            program = self._program
+            # column-major, as GLSL reads matrices
+            program["view_projection"].write(view_projection.T.astype(np.float32).tobytes())
+            program["camera_position"].value = tuple(float(c) for c in pose[:3, 3])
+            program["light_count"].value = len(lights)
+            program["light_direction"].write(directions.tobytes())
+            program["light_radiance"].write(radiances.tobytes())
+        self._framed = True
 
     # --- per frame -----------------------------------------------------------------------------
     def update(self, handle: int | None = None, vertices: np.ndarray | None = None) -> None:
@@ -440,26 +420,33 @@ class Scene3D:
         items = self._items if handle is None else [self._items[handle]]
         for item in items:
             item.refresh(vertices if handle is not None else None)
-        if self._frames == 0:
+        with self._lock, self._context:
             for item in items:
-                item.primitive.positions = item.buffer[:, :3].copy()
-                item.primitive.normals = item.buffer[:, 3:6].copy()
-            return
-        self._renderer._platform.make_current()
-        for item in items:
-            GL.glBindBuffer(GL.GL_ARRAY_BUFFER, item.primitive._buffers[0])
-            GL.glBufferSubData(GL.GL_ARRAY_BUFFER, 0, item.buffer.nbytes, item.buffer)
-        GL.glBindBuffer(GL.GL_ARRAY_BUFFER, 0)
+                item.vbo.write(item.buffer)
 
     def render(self) -> np.ndarray:
         """The current frame, (H, W, 4) uint8 RGBA with straight alpha."""
         self._check_open()
         if not self._items:
             raise ValueError("the scene is empty: add a mesh before rendering")
-        flags = pyrender.RenderFlags.RGBA
-        color, _ = self._renderer.render(self._scene, flags=flags)
-        self._frames += 1
-        return np.array(color)  # own the pixels: GL reuses its buffer
+        context, program = self._context, self._program
+        with self._lock, context:
+            self._drawn.use()
+            self._drawn.clear(*self.background)
+            context.enable(moderngl.DEPTH_TEST)
+            for item in self._items:
+                if item.look.double_sided:
+                    context.disable(moderngl.CULL_FACE)
+                else:
+                    context.enable(moderngl.CULL_FACE)
+                program["base_color_factor"].value = (*item.look.base_color, 1.0)
+                program["metallic"].value = float(item.look.metallic)
+                program["roughness"].value = float(item.look.roughness)
+                item.vao.render(moderngl.TRIANGLES)
+            if self._drawn is not self._target:  # resolve the multisampled frame
+                context.copy_framebuffer(self._target, self._drawn)
+            self._target.read_into(self._pixels, components=4, alignment=1)
+        return self._pixels[::-1].copy()   # OpenGL's rows run bottom-up
 
     # --- life cycle ----------------------------------------------------------------------------
     def release(self) -> None:
@@ -475,16 +462,24 @@ class Scene3D:
 
     def close(self) -> None:
         """Free the OpenGL context and buffers (idempotent)."""
-        if self._renderer is not None:
-            self._renderer.delete()
-            self._renderer = None
+        context, self._context = getattr(self, "_context", None), None
+        if context is None:
+            return
+        with self._lock:
+            with context:
+                for item in self._items:
+                    item.release()
+                for resource in {id(f): f for f in (self._drawn, self._target)}.values():
+                    resource.release()
+                self._program.release()
+            context.release()
 
     @property
     def closed(self) -> bool:
-        return self._renderer is None
+        return self._context is None
 
     def _check_open(self) -> None:
-        if self._renderer is None:
+        if self._context is None:
             raise ValueError("this Scene3D is closed")
 
     def __enter__(self) -> "Scene3D":

@@ -23,15 +23,12 @@ Per-kind options (`[characters.NAME.options]` in the session file):
 """
 from __future__ import annotations
 
-import logging
 from pathlib import Path
 from typing import Callable
 
 import numpy as np
 
 from .config import CharacterConfig, CharacterKind, SessionError
-
-log = logging.getLogger(__name__)
 
 LAYER_MARGIN = 0.12   # free border around a character in its layer [fraction of its size]
 
@@ -186,7 +183,7 @@ class ImageLayer:
 # 3D puppets -----------------------------------------------------------------------------------
 
 class SceneLayer:
-    """A 3D puppet drawn by `mop.render.scene3d.Scene3D` (pyrender, offscreen) into its own
+    """A 3D puppet drawn by `mop.render.scene3d.Scene3D` (OpenGL, offscreen) into its own
     square transparent layer; the scene is built once and only vertices change per frame."""
 
     def __init__(self, puppet, *, height: int, colour=None, camera: str = "three_quarter"):
@@ -210,15 +207,7 @@ class SceneLayer:
         self.scene.release()
 
     def close(self) -> None:
-        try:
-            self.scene.close()
-        except Exception as error:
-            # pyrender's EGL teardown terminates the display shared by every scene of the
-            # process, so after the first scene closes the others cannot make their context
-            # current any more; their resources went with the display.
-            if type(error).__name__ != "GLError":
-                raise
-            log.debug("3D layer closed after the EGL display was terminated: %s", error)
+        self.scene.close()
 
 
 def _mesh_layer(character: CharacterConfig, puppet, height: int, colour):

@@ -66,6 +66,7 @@ def marker_pose(k, count):
     return rvec, tvec
 
 
+@pytest.mark.slow
 def test_aruco_pose_along_a_known_path(tmp_path):
     camera = default_camera_matrix(W, H)
     count = 16
@@ -106,6 +107,7 @@ def test_aruco_rejects_bad_options():
 
 # -- colour blobs ----------------------------------------------------------------------------
 
+@pytest.mark.slow
 def test_color_blobs_along_known_paths(tmp_path):
     count = 20
     frames, red, blue = [], [], []
@@ -171,6 +173,7 @@ def face_frames(count):
     return frames, np.array(offsets, float)
 
 
+@pytest.mark.slow
 def test_face_follows_a_photograph_moved_along_a_known_path(tmp_path):
     count = 10
     frames, offsets = face_frames(count)
@@ -231,6 +234,7 @@ def reference_openness(mask):
     return 1 - len(xs) / ConvexHull(corners).volume
 
 
+@pytest.mark.slow
 def test_hand_openness_and_gaps_against_the_drawn_silhouette(tmp_path):
     extensions = np.linspace(0, 1, 11)
     frames, masks = [], []

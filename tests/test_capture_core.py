@@ -181,6 +181,7 @@ def test_bad_specs_say_what_was_expected(spec, message):
         open_source(spec)
 
 
+@pytest.mark.slow
 def test_a_missing_hid_device_is_an_oserror_naming_the_profile():
     with pytest.raises(OSError, match=r"no HID device fits profile 'p5' \(looking for "
                                       r"1209:0001\)"):

@@ -223,6 +223,7 @@ _INTERRUPTED = textwrap.dedent("""
 
 @pytest.mark.parametrize("name", ["clip.mp4", "clip.gif"])
 @pytest.mark.parametrize("style", ["with", "bare"])
+@pytest.mark.slow
 def test_ctrl_c_leaves_a_playable_file(tmp_path, name, style):
     from PIL import Image
     script = tmp_path / "render.py"

@@ -95,6 +95,7 @@ def mop_performance(rng, template, frames, *, speed=0.45, noise=0.3):
 # ---- MOP mode: the paper to the letter ----------------------------------------------------------
 
 @pytest.mark.parametrize("window", [3, 7, 100])
+@pytest.mark.slow
 def test_mop_matches_slow_reference(rng, window):
     T, D = 40, 3
     template = random_template(rng, T, D)
@@ -266,6 +267,7 @@ def test_all_nan_frame_only_predicts(rng):
     assert after.variance > before.variance
 
 
+@pytest.mark.slow
 def test_a_million_hostile_frames_give_finite_output(rng):
     template = random_template(rng, 40, 4)
     N = 1_000_000
@@ -286,6 +288,7 @@ def test_a_million_hostile_frames_give_finite_output(rng):
         assert trace.variance.min() >= 0.0
 
 
+@pytest.mark.slow
 def test_long_run_does_not_underflow(rng):
     """Two hundred thousand frames of a template performed over and over: the likelihood keeps
     falling linearly (no underflow to -inf, no stall) and the follower still tracks."""
@@ -346,6 +349,7 @@ def test_speed_model_follows_twice_as_fast_where_mop_cannot(rng):
 
 
 @pytest.mark.parametrize("n", [0.0, 1e-12, 1e-3, 0.7, 40.0, 3e3, 1e6])
+@pytest.mark.slow
 def test_position_inside_a_cell_matches_quadrature(n):
     """The reported position inside a state's cell: v in [0, 1/2] with density proportional
     to exp(a v - n v^2 / 2) (the emission along one template segment). Its log-integral, mean
@@ -497,6 +501,7 @@ def test_bank_recognises_switches_quickly_without_flicker(rng, actions):
 
 
 @pytest.mark.parametrize("done, most", [(1.0, 8), (0.3, 10), (0.5, 10), (0.7, 10)])
+@pytest.mark.slow
 def test_bank_switch_is_followed_within_10_frames_in_21_scenarios(done, most):
     """The switch above, over 21 fixed scenarios (seeds 0-20, whatever the session's seed),
     after the first action was performed to its end or abandoned at 30 / 50 / 70 % of it: the
@@ -589,6 +594,7 @@ def test_bank_rejects_what_no_template_explains(rng, actions):
     assert np.mean(known["action"][10:] == bank.actions.index("nod")) > 0.95
 
 
+@pytest.mark.slow
 def test_bank_survives_hostile_frames(rng, actions):
     bank = FollowerBank(actions)
     X = rng.normal(size=(20000, 4))

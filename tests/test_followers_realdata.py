@@ -53,6 +53,7 @@ def test_progress_on_time_warped_gunpoint(rng, gunpoint, speed):
     assert np.mean(np.concatenate(inside)) >= 0.8
 
 
+@pytest.mark.slow
 def test_interval_holds_the_true_position_on_multichannel_takes(rng, basic_motions):
     """BasicMotions' training takes (6 channels, fast moves: consecutive frames far apart in
     sigmas) replayed at 0.5-2x as in the progress tests: the 90 % interval holds the true
@@ -77,6 +78,7 @@ def test_interval_holds_the_true_position_on_multichannel_takes(rng, basic_motio
     assert np.median(np.concatenate(errors)) < 0.002  # a fifth of a frame is 0.002
 
 
+@pytest.mark.slow
 def test_interval_holds_the_truth_at_half_and_double_speed(rng):
     """GunPoint's training gestures (nothing in the follower was chosen on them) at 0.5x and
     2x: the 90 % interval holds the truth in 85-95 % of frames at both speeds, narrowed at 0.5x
@@ -100,6 +102,7 @@ def test_interval_holds_the_truth_at_half_and_double_speed(rng):
     assert coverage[2.0, True] > coverage[2.0, False]
 
 
+@pytest.mark.slow
 def test_no_jump_back_to_the_start_in_the_middle_of_a_repetitive_activity(rng, basic_motions):
     """BasicMotions' 40 training takes (walking, running, badminton: cycles that look like the
     template's start) replayed at 0.5, 1 and 1.5x as in the progress tests: the follower stays
@@ -125,6 +128,7 @@ def test_no_jump_back_to_the_start_in_the_middle_of_a_repetitive_activity(rng, b
     assert sum(e > 0.3 for e in worst[1e-3]) >= 3
 
 
+@pytest.mark.slow
 def test_bank_can_keep_the_shown_actions_repetition_and_still_switches(rng, basic_motions):
     """``active_restart=0``: the shown action's follower never begins a new repetition from the
     middle of its template, while the others still may (1e-3 per frame, so a switch is
@@ -179,6 +183,7 @@ def _bank(X_train, y_train, classes, index=0, **options):
     return FollowerBank(dict(zip(classes, normed)), **options), normaliser
 
 
+@pytest.mark.slow
 def test_recognition_among_basic_motions(basic_motions):
     """One demonstration per activity; the test recordings of the four activities (other
     sessions) are recognised at their end well above chance (25 %). Rejection is off here: it is
@@ -195,6 +200,7 @@ def test_recognition_among_basic_motions(basic_motions):
     assert np.mean(correct) >= 0.65
 
 
+@pytest.mark.slow
 def test_irregular_takes_of_a_known_activity_are_not_turned_away(basic_motions):
     """Badminton from another session swings at other moments than the demonstration, and its
     follower loses track; its outline model still explains it. With the outline counted in the
@@ -216,6 +222,7 @@ def test_irregular_takes_of_a_known_activity_are_not_turned_away(basic_motions):
             FollowerBank({"a": X_train[0]}, outline_fit_margin=bad)
 
 
+@pytest.mark.slow
 def test_unrecorded_activity_is_rejected(basic_motions):
     """A bank that knows standing, walking and badminton says None to running."""
     X_train, y_train, X_test, y_test = basic_motions
@@ -229,6 +236,7 @@ def test_unrecorded_activity_is_rejected(basic_motions):
 
 
 @pytest.mark.parametrize("speed", [1.0, 2.0])
+@pytest.mark.slow
 def test_interval_is_calibrated_on_held_out_gestures(rng, speed):
     """The 90 % interval (progress +- 1.645 sd) of the default follower, whose emission scale is
     learned online, holds the true position in roughly 90 % of frames on GunPoint's training
@@ -283,6 +291,7 @@ def _wiimote_bank(X, y, classes, draw, **options):
     return FollowerBank(dict(zip(classes, normed)), **options), normaliser
 
 
+@pytest.mark.slow
 def test_wiimote_gestures_recognised_from_one_template_each(wiimote):
     """One demonstration per gesture (train split); the 50 test gestures (other performers, as
     recorded) are recognised well above chance (10 %) at their end, both by the bank's
@@ -308,6 +317,7 @@ def _auroc(positive, negative):
     return float((p > n).mean() + 0.5 * (p == n).mean())
 
 
+@pytest.mark.slow
 def test_wiimote_demonstrations_replayed_are_recognised_early(rng, wiimote):
     """The case puppetry is mostly performed in: the author repeats their own demonstrations.
     Each of two draws' demonstrations replayed at 0.5 / 1 / 1.5 / 2x (tempo wandering by 10 %,
@@ -355,6 +365,7 @@ def _rejection_score(bank, performance):
     return float((trace["fits"] - bank.thresholds).max(axis=1)[10:].mean())
 
 
+@pytest.mark.slow
 def test_unrecorded_wiimote_gesture_rejected_when_time_warped(rng, wiimote):
     """The issue's rejection target on its own protocol, real gestures time-warped: each of the
     10 gestures left out of a bank of the other 9 (one demonstration each, two draws); the
@@ -385,6 +396,7 @@ def test_unrecorded_wiimote_gesture_rejected_when_time_warped(rng, wiimote):
 @pytest.mark.xfail(strict=True, reason="beyond the issue's protocol: across performers (another "
                    "take of each known gesture) the rejection AUROC is about 0.53 "
                    "(benchmarks/followers.py --only wiimote)")
+@pytest.mark.slow
 def test_unrecorded_wiimote_gesture_rejected_across_performers(wiimote):
     """Harder than the issue's time-warped protocol: the known gestures are *other takes* (the
     test split, other performers) rather than the demonstrations performed again, so one

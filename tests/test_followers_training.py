@@ -138,6 +138,7 @@ def test_confusability_flags_the_near_duplicate(rng):
     np.testing.assert_allclose(again.matrix, result.matrix)
 
 
+@pytest.mark.slow
 def test_confusability_picture(tmp_path, rng):
     pytest.importorskip("matplotlib")
     templates = {n: smooth_template(rng, 40, 2) for n in ("a", "b")}

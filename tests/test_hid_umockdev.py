@@ -27,7 +27,7 @@ from capture.hid.profile import load_profile
 from capture.hid.status import Connection
 from hid_emulated_pads import emulated, feature_report
 
-pytestmark = pytest.mark.device
+pytestmark = [pytest.mark.device, pytest.mark.slow]
 
 ROOT = Path(__file__).resolve().parent.parent
 SHIM_SOURCE = Path(__file__).resolve().parent / "data" / "hid" / "hidraw_shim.c"

@@ -137,6 +137,7 @@ def momo(momo_path):
     return ImagePuppet.from_image(momo_path)
 
 
+@pytest.mark.slow
 def test_even_odd_against_opencv(rng):
     mask = _blob_mask(rng, 160, 200)
     mask[60:80, 90:110] = False   # a hole
@@ -208,6 +209,7 @@ def test_cell_size_sets_grid(momo_path):
     assert len(fine.vertices) > 5 * len(coarse.vertices)
 
 
+@pytest.mark.slow
 def test_large_picture_meshed_downscaled_rendered_full_size(momo_path):
     from PIL import Image
     big = np.asarray(Image.open(momo_path).resize((2048, 2048), Image.BICUBIC))
@@ -236,6 +238,7 @@ def _pinned(path, **kwargs):
     return puppet
 
 
+@pytest.mark.slow
 def test_rest_stays_at_rest(momo_path):
     for mode in ("springs", "arap"):
         puppet = _pinned(momo_path, mode=mode)
@@ -277,6 +280,7 @@ def test_pulled_pin_drags_neighbours_more_than_far_side(momo_path):
     assert moved[near].mean() > 20.0
 
 
+@pytest.mark.slow
 def test_stiffer_materials_carry_a_pull_further(momo_path):
     """With no anchors, a pull on the head reaches the feet sooner the stiffer the material
     (the presets of characters/materials.toml); unknown names are rejected."""
@@ -466,6 +470,7 @@ def test_key_times_include_motion_keys_and_bound_gaps():
 
 
 @pytest.mark.parametrize("mode", ["springs", "arap"])
+@pytest.mark.slow
 def test_baked_playback_deviation_is_bounded(momo_path, mode):
     puppet, motion = _momo_with_motion(momo_path, mode)
     fps = 25.0

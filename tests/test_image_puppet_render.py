@@ -70,6 +70,7 @@ def _reference_render(texture, texture_xy, screen_xy, triangles, size, colour):
 
 
 @pytest.mark.parametrize("background", ["#3060a0", "transparent"])
+@pytest.mark.slow
 def test_rasteriser_matches_slow_reference(small_puppet, rng, background):
     puppet = small_puppet
     screen = _smooth_deformation(puppet.vertices, rng)
@@ -198,6 +199,7 @@ def _psnr(a, b):
 
 
 @pytest.mark.parametrize("target", ["clip.mp4", "clip.mkv", "clip.gif", "frames/"])
+@pytest.mark.slow
 def test_render_round_trips_through_export(small_puppet, tmp_path, target):
     from PIL import Image
     frames = _pulled_frames(small_puppet)
@@ -247,6 +249,7 @@ def _small_assets(tmp_path):
     return tmp_path / "momo.png", tmp_path / "wave.json", tmp_path / "pins.json", pins
 
 
+@pytest.mark.slow
 def test_cli_renders_a_motion(tmp_path, capsys):
     from mop.cli import main
     image, motion, pins, _ = _small_assets(tmp_path)
@@ -271,6 +274,7 @@ def test_cli_renders_a_motion(tmp_path, capsys):
     assert len(list(tmp_path.glob("seq_*.png"))) == 6
 
 
+@pytest.mark.slow
 def test_cli_bad_input_messages(tmp_path, capsys):
     from mop.cli import main
     image, motion, pins, pin_table = _small_assets(tmp_path)

@@ -51,6 +51,7 @@ def puppet(request):
 
 
 @pytest.mark.parametrize("puppet", PUPPETS, indirect=True)
+@pytest.mark.slow
 def test_three_layers_with_every_node_inside(puppet, rng):
     counts = np.bincount(puppet.layer, minlength=3)
     assert len(counts) == 3 and np.all(counts >= 4)
@@ -74,6 +75,7 @@ def test_three_layers_with_every_node_inside(puppet, rng):
 
 
 @pytest.mark.parametrize("puppet", PUPPETS, indirect=True)
+@pytest.mark.slow
 def test_tetrahedra_have_positive_volume_and_fill_the_puppet(puppet):
     volume = tetrahedron_volumes(puppet.model.rest_positions, puppet.tetrahedra)
     assert volume.min() > 0
@@ -82,6 +84,7 @@ def test_tetrahedra_have_positive_volume_and_fill_the_puppet(puppet):
 
 
 @pytest.mark.parametrize("puppet", PUPPETS, indirect=True)
+@pytest.mark.slow
 def test_connection_weights_sum_to_one(puppet):
     w = puppet.connection.matrix()
     assert w.shape == (len(puppet.rest_vertices), int((puppet.layer == 0).sum()))
@@ -90,6 +93,7 @@ def test_connection_weights_sum_to_one(puppet):
 
 
 @pytest.mark.parametrize("puppet", PUPPETS, indirect=True)
+@pytest.mark.slow
 def test_a_puppet_at_rest_stays_at_rest(puppet):
     for _ in range(25):
         puppet.step(DT, {})
@@ -111,6 +115,7 @@ def integrator(request, froggy):
     froggy.reset()
 
 
+@pytest.mark.slow
 def test_opening_the_glove_opens_the_mouth(froggy, integrator):
     froggy.reset()
     closed = froggy.mouth_gap()
@@ -132,6 +137,7 @@ def test_opening_the_glove_opens_the_mouth(froggy, integrator):
     assert froggy.integrator.last_report.ok and not froggy.integrator.last_report.retries
 
 
+@pytest.mark.slow
 def test_frog_at_rest_stays_at_rest_with_either_integrator(froggy, integrator):
     froggy.reset()
     for _ in range(10):
@@ -139,6 +145,7 @@ def test_frog_at_rest_stays_at_rest_with_either_integrator(froggy, integrator):
     assert np.abs(froggy.state.x - froggy.model.rest_positions).max() < 1e-10
 
 
+@pytest.mark.slow
 def test_fingers_move_their_own_side_of_the_mouth(froggy):
     froggy.reset()
     upper, lower = froggy.landmark("upper_lip").copy(), froggy.landmark("lower_lip").copy()
@@ -151,6 +158,7 @@ def test_fingers_move_their_own_side_of_the_mouth(froggy):
 
 
 @pytest.mark.realdata
+@pytest.mark.slow
 def test_position_targets_pull_a_region_towards_them(bunny):
     bunny.reset()
     nodes = bunny.regions["index"]
@@ -165,6 +173,7 @@ def test_position_targets_pull_a_region_towards_them(bunny):
     np.testing.assert_array_equal(bunny.surface(), bunny.rest_vertices)
 
 
+@pytest.mark.slow
 def test_motion_channels_drive_the_fingers(froggy):
     from characters import Motion
     froggy.reset()
@@ -177,6 +186,7 @@ def test_motion_channels_drive_the_fingers(froggy):
     froggy.reset()
 
 
+@pytest.mark.slow
 def test_target_names_are_the_five_fingers_and_unknown_names_fail(froggy):
     assert froggy.target_names == FINGERS
     with pytest.raises(ValueError, match=r"unknown target 'elbow'.*\('thumb', 'index'"):
@@ -189,6 +199,7 @@ def test_target_names_are_the_five_fingers_and_unknown_names_fail(froggy):
         froggy.step(0.0, {})
 
 
+@pytest.mark.slow
 def test_froggy_regions_come_from_its_sidecar(froggy):
     sidecar = json.loads((LatexPuppet.froggy.__func__.__globals__["FROGGY"]).with_suffix(
         ".json").read_text())
@@ -204,6 +215,7 @@ def test_froggy_regions_come_from_its_sidecar(froggy):
 
 
 @pytest.mark.realdata
+@pytest.mark.slow
 def test_trimesh_object_and_path_build_the_same_puppet(bunny):
     mesh = trimesh.load(_pybullet("bunny.obj"), force="mesh")
     again = LatexPuppet.from_mesh(mesh, masses=400)
@@ -212,6 +224,7 @@ def test_trimesh_object_and_path_build_the_same_puppet(bunny):
 
 
 @pytest.mark.realdata
+@pytest.mark.slow
 def test_stiffer_foam_opens_less(bunny):
     from characters.materials import material
     from dataclasses import replace

@@ -38,6 +38,7 @@ def duck():
 # --- surfaces -----------------------------------------------------------------------------------
 
 @pytest.mark.realdata
+@pytest.mark.slow
 def test_inside_test_matches_trimesh_contains(bunny, rng):
     lo, hi = bunny.vertices.min(0), bunny.vertices.max(0)
     points = rng.uniform(lo, hi, (1500, 3))
@@ -139,6 +140,7 @@ def _reference_cost(vertices, faces, v, *, lam, cos_tau, h):
 
 @pytest.mark.realdata
 @pytest.mark.parametrize("lam", [0.0, 0.5, 1.0])
+@pytest.mark.slow
 def test_removal_priorities_match_a_python_rederivation(bunny, rng, lam):
     cost, target = dec.removal_costs(bunny.vertices, bunny.faces, target_vertices=150,
                                      roundness_weight=lam, normal_threshold=50.0)
@@ -177,6 +179,7 @@ def test_decimated_surface_is_closed_keeps_locked_vertices_and_topology(duck, rn
 
 
 @pytest.mark.realdata
+@pytest.mark.slow
 def test_decimator_beats_plain_quadric_on_roundness_at_a_bounded_shape_cost(duck):
     ours = dec.decimate(duck.vertices, duck.faces, target_vertices=400, roundness_weight=0.5)
     ours_q = dec.quality(duck.vertices, duck.faces, duck.vertices[ours.kept], ours.faces,
@@ -225,6 +228,7 @@ def sphere_layers():
                                         sphere.vertices, sphere.faces)
 
 
+@pytest.mark.slow
 def test_layers_are_three_nested_closed_shells(sphere_layers):
     sphere, result, layers = sphere_layers
     counts = np.bincount(layers.layer, minlength=3)
@@ -242,6 +246,7 @@ def test_layers_are_three_nested_closed_shells(sphere_layers):
         assert np.isin(np.flatnonzero(layers.layer == outer), ties).mean() > 0.9
 
 
+@pytest.mark.slow
 def test_layer_tetrahedra_are_positive_inside_and_fill_the_solid(sphere_layers):
     sphere, _, layers = sphere_layers
     volume = tetrahedron_volumes(layers.points, layers.tetrahedra)
@@ -321,6 +326,7 @@ def test_region_specs_reject_unknown_fingers_and_bad_openings(tmp_path):
 
 
 @pytest.mark.realdata
+@pytest.mark.slow
 def test_barycentric_connection_lands_on_the_nearest_decimated_triangle(duck):
     result = dec.decimate(duck.vertices, duck.faces, target_vertices=300)
     conn = build_connection(duck.vertices, duck.faces, result.kept, weighting="barycentric",

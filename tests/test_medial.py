@@ -43,6 +43,7 @@ def real(request, duck, bunny):
 # --- skeleton ------------------------------------------------------------------------------------
 
 @pytest.mark.realdata
+@pytest.mark.slow
 def test_one_skeletal_point_per_vertex_same_connectivity(real):
     vertex_count = len(real.rest_vertices)
     assert real.skeleton.shape == (vertex_count, 3)
@@ -58,6 +59,7 @@ def test_one_skeletal_point_per_vertex_same_connectivity(real):
 
 
 @pytest.mark.realdata
+@pytest.mark.slow
 def test_vertex_count_is_that_of_the_closed_surface():
     # OBJ texture seams split vertices; the medial object works on the welded surface
     raw = trimesh.load(real_mesh("duck.obj"), force="mesh")
@@ -70,6 +72,7 @@ def test_vertex_count_is_that_of_the_closed_surface():
 
 
 @pytest.mark.realdata
+@pytest.mark.slow
 def test_skeletal_points_inside_the_surface(real):
     info = real.skeleton_info
     edge = float(real.mesh.edges_unique_length.mean())
@@ -83,6 +86,7 @@ def test_skeletal_points_inside_the_surface(real):
     assert np.all(signed > -1e-9)
 
 
+@pytest.mark.slow
 def test_internal_voronoi_points_match_slow_reference(bunny):
     mesh = bunny.mesh
     points = np.asarray(mesh.vertices)
@@ -96,6 +100,7 @@ def test_internal_voronoi_points_match_slow_reference(bunny):
 
 
 @pytest.mark.realdata
+@pytest.mark.slow
 def test_inner_chords_grid_matches_brute_force(duck):
     mesh = duck.mesh
     points, normals = np.asarray(mesh.vertices), np.asarray(mesh.vertex_normals)
@@ -123,6 +128,7 @@ def capsule(radius=0.2, half_length=0.5, edge=0.05):
     return trimesh.Trimesh(solid.vert_properties[:, :3], solid.tri_verts)
 
 
+@pytest.mark.slow
 def test_capsule_skeleton_lies_near_its_axis():
     # analytic medial axis of a capsule: the segment; every medial ball has the radius
     radius = 0.2
@@ -197,6 +203,7 @@ def two_overlapping_spheres(subdivisions=1):
     return trimesh.util.concatenate([a, b])
 
 
+@pytest.mark.slow
 def test_self_intersection_sweep_matches_all_pairs():
     mesh = two_overlapping_spheres(1)
     fast = {tuple(p) for p in mesh_input.self_intersections(mesh.vertices, mesh.faces)}
@@ -205,6 +212,7 @@ def test_self_intersection_sweep_matches_all_pairs():
 
 
 @pytest.mark.realdata
+@pytest.mark.slow
 def test_duck_small_self_intersection_is_repaired():
     raw = trimesh.load(real_mesh("duck.obj"), force="mesh")
     raw.merge_vertices(merge_tex=True, merge_norm=True)
@@ -305,6 +313,7 @@ def creature():
     return MedialObject.shipped("medial_caterpillar")
 
 
+@pytest.mark.slow
 def test_shipped_creature_has_its_joint_tree(creature):
     assert creature.target_names == ("tail", "front", "chest", "head", "skull", "jaw")
     tree = creature.joints
@@ -328,6 +337,7 @@ def creature_path():
     return os.path.join(os.path.dirname(characters.__file__), "assets", "medial_caterpillar.obj")
 
 
+@pytest.mark.slow
 def test_shipped_creature_regenerates_identically(tmp_path):
     from characters.assets import caterpillar as builder
 
@@ -383,6 +393,7 @@ def test_too_coarse_mesh_is_refused():
         MedialObject.from_mesh(trimesh.creation.box())
 
 
+@pytest.mark.slow
 def test_mesh_too_coarse_for_its_curvature_is_refused_and_subdividing_helps():
     # a cone is only its rim, apex and base centre: no internal Voronoi point for most vertices
     cone = trimesh.creation.cone(radius=0.5, height=1.0, sections=32)

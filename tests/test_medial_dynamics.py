@@ -43,6 +43,7 @@ def region_violation(obj, centres):
 
 @pytest.mark.realdata
 @pytest.mark.parametrize("constraint", ["circumsphere", "spring_reduction"])
+@pytest.mark.slow
 def test_constraint_keeps_every_mass_point_in_its_region(constraint, bunny_mesh, rng):
     """10^4 steps of violent input: the joint flung to random orientations every step, every
     mass point kicked with random velocities and displacements as large as the object."""
@@ -106,6 +107,7 @@ def material_runs(bunny_mesh):
 
 
 @pytest.mark.realdata
+@pytest.mark.slow
 def test_water_wobbles_longest(material_runs):
     water = material_runs["water"]["settle"]
     others = [material_runs[n]["settle"] for n in PRESETS if n != "water"]
@@ -113,6 +115,7 @@ def test_water_wobbles_longest(material_runs):
 
 
 @pytest.mark.realdata
+@pytest.mark.slow
 def test_plastic_does_not_deform(material_runs):
     plastic = material_runs["plastic"]
     assert plastic["deviation"] == 0.0      # exactly the rigidly rotated rest shape, always
@@ -123,6 +126,7 @@ def test_plastic_does_not_deform(material_runs):
 
 
 @pytest.mark.realdata
+@pytest.mark.slow
 def test_thick_skin_is_damped_fastest_and_skin_is_firmest(material_runs):
     dynamic = [n for n in PRESETS if n != "plastic"]
     # C_vd 0.7: the most damped of Table 1
@@ -133,6 +137,7 @@ def test_thick_skin_is_damped_fastest_and_skin_is_firmest(material_runs):
 
 
 @pytest.mark.realdata
+@pytest.mark.slow
 def test_tight_cloth_sways_slowest(material_runs):
     # D 0.2 against 1.0: the softest springs, the lowest sway frequency
     cloth = material_runs["tight cloth"]["frequency"]
@@ -174,6 +179,7 @@ def creature_mesh():
 
 
 @pytest.mark.parametrize("angle,inner", [(0.5, "top"), (-0.5, "bottom")])
+@pytest.mark.slow
 def test_fold_on_the_inner_side_of_the_joint(angle, inner, creature_mesh):
     mesh, joints = creature_mesh
     obj = MedialObject.from_mesh(mesh, material="skin", constraint="spring_reduction",
@@ -199,6 +205,7 @@ def test_fold_on_the_inner_side_of_the_joint(angle, inner, creature_mesh):
     assert np.median(signed[side[outer]]) > 1.0      # stretched on the outer side
 
 
+@pytest.mark.slow
 def test_several_sections_at_once_follow_their_chain(creature_mesh):
     mesh, joints = creature_mesh
     obj = MedialObject.from_mesh(mesh, material="skin", joints=joints,
@@ -223,6 +230,7 @@ def test_several_sections_at_once_follow_their_chain(creature_mesh):
     assert gap_now > gap_rest + 0.02
 
 
+@pytest.mark.slow
 def test_shipped_motion_drives_the_creature():
     obj = MedialObject.shipped("medial_caterpillar", constraint="spring_reduction")
     import characters
@@ -274,6 +282,7 @@ def test_substeps_keep_verlet_below_its_stability_limit(bunny_mesh):
     assert obj.max_substep < 2.0 / np.sqrt(k_over_m)
 
 
+@pytest.mark.slow
 def test_bone_spring_reduction_matches_the_core_constraint(bunny_mesh, rng):
     """The medial kernel (per point, early stop) against the core's SpringReductionConstraint
     (every pass over every spring) on the same violent positions: the same result."""

@@ -13,6 +13,8 @@ import pytest
 
 from session_files import mop_process, write_session
 
+pytestmark = pytest.mark.slow   # a live session watched in a real Chromium
+
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 
 

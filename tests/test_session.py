@@ -14,6 +14,8 @@ from mop.session import Mode, load_session
 from mop.session.build import Overrides, build_session
 from session_files import TAKES, free_udp_port, mop_process, session_text, write_session
 
+pytestmark = pytest.mark.slow   # whole sessions, several in real time
+
 
 class FrameLog:
     """An output that keeps every frame, the states, and a digest of every puppet's surface

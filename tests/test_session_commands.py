@@ -14,6 +14,7 @@ sys.path.insert(0, str(ROOT / "recordings"))
 import make_demo_takes  # noqa: E402  (the generator of the shipped takes)
 
 
+@pytest.mark.slow
 def test_train_prints_and_plots_confusability(tmp_path, capsys):
     from followers import confusability
     from mop.session import load_session
@@ -47,6 +48,7 @@ def runs(labels):
 
 
 @pytest.mark.parametrize("show", ["glove_show", "hand_show"])
+@pytest.mark.slow
 def test_plot_follows_a_show_in_the_order_it_was_performed(tmp_path, show, capsys):
     from mop.commands import plot
     out = tmp_path / f"{show}.png"
@@ -68,6 +70,7 @@ def test_plot_follows_a_show_in_the_order_it_was_performed(tmp_path, show, capsy
     assert progress.min() >= 0 and progress.max() == pytest.approx(1.0, abs=0.02)
 
 
+@pytest.mark.slow
 def test_plot_without_session_uses_the_takes_with_motions(tmp_path, capsys):
     out = tmp_path / "trace.png"
     assert main(["plot", "hand_show", "--takes", str(TAKES), "--out", str(out)]) == 0

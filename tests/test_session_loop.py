@@ -413,6 +413,7 @@ def standin_session(mode, *, delay, pause=None, max_lag=0.5):
     return session, recorder
 
 
+@pytest.mark.slow
 def test_live_mode_follows_every_frame_and_repeats_the_pictures_it_drops():
     replayed, reference = standin_session("replay", delay=0.0)
     replayed.run(duration=2.0)

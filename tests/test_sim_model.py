@@ -41,6 +41,7 @@ def test_forces_match_reference(rng, dim):
                                atol=1e-10)
 
 
+@pytest.mark.slow
 def test_elastic_only_kernel_matches(rng):
     model = random_model(rng, damping=False)
     x = model.rest_positions + 0.1 * rng.normal(size=model.rest_positions.shape)
@@ -58,6 +59,7 @@ def test_elastic_only_kernel_matches(rng):
 
 
 @pytest.mark.parametrize("chunk", [None, 1, 5])
+@pytest.mark.slow
 def test_split_kernels_match_fused_in_any_spring_order(rng, chunk):
     """The split passes (gather, arithmetic, scatter by runs) give the fused loop's sums for
     springs in random order and orientation, and the plan puts them back in model order; also

@@ -26,6 +26,7 @@ def measured_period(elongation, dt):
     return float(np.mean(np.diff(crossings)))
 
 
+@pytest.mark.slow
 def test_single_spring_period_verlet():
     k, m = 50.0, 0.2
     model, state = two_masses(k, m)
@@ -41,6 +42,7 @@ def test_single_spring_period_verlet():
     assert abs(measured_period(elongation, dt) / analytic - 1) < 1e-3
 
 
+@pytest.mark.slow
 def test_verlet_conserves_energy_without_damping(rng):
     nodes = 30
     x = rng.normal(size=(nodes, 3))
@@ -142,6 +144,7 @@ def random_cloud(rng, nodes=20, radius=1.4, **kwargs):
 
 
 @pytest.mark.parametrize("name", list(INTEGRATORS))
+@pytest.mark.slow
 def test_momentum_conserved_without_external_forces(rng, name):
     model = random_cloud(rng, stiffness=30.0, damping=0.5)
     state = model.state()
@@ -237,6 +240,7 @@ def reference_trajectory(model, state, duration):
 
 
 @pytest.mark.parametrize("name", ["implicit", "projective"])
+@pytest.mark.slow
 def test_implicit_converges_to_reference_as_dt_shrinks(name):
     # projective dynamics damps springs isotropically (a documented difference), so it is
     # compared on the same chain without spring damping (velocity damping stays)

@@ -98,6 +98,7 @@ def test_nan_in_control_is_refused_not_simulated():
 
 
 @pytest.mark.parametrize("name", list(INTEGRATORS))
+@pytest.mark.slow
 def test_constraints_hold_under_violent_control(rng, name):
     # a "medial" strip: surface nodes, each tied to a fixed inner bone point by a bone spring
     count = 12

@@ -190,6 +190,7 @@ RECORDER = textwrap.dedent("""\
     """)
 
 
+@pytest.mark.slow
 def test_a_recording_killed_with_sigkill_keeps_all_but_the_last_100_ms(tmp_path, capsys):
     folder = tmp_path / "recordings"
     script = tmp_path / "recorder.py"
@@ -266,6 +267,7 @@ def test_takes_commands(tmp_path, rng, capsys, monkeypatch):
     assert "no take 'nothing'" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_record_command_with_a_replayed_performer(tmp_path, capsys):
     import cv2
     performer = TakeStore(tmp_path / "performer")

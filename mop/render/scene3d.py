@@ -450,15 +450,8 @@ class Scene3D:
 
     # --- life cycle ----------------------------------------------------------------------------
     def release(self) -> None:
-        """Make no GL context current in the calling thread, so that another thread may draw
-        this scene next (an EGL context is current in one thread at a time; pyrender makes it
-        current again on its next use)."""
-        platform = None if self._renderer is None else self._renderer._platform
-        display = getattr(platform, "_egl_display", None)
-        if display is None:
-            return
-        from OpenGL.EGL import EGL_NO_CONTEXT, EGL_NO_SURFACE, eglMakeCurrent
-        eglMakeCurrent(display, EGL_NO_SURFACE, EGL_NO_SURFACE, EGL_NO_CONTEXT)
+        """Let another thread draw this scene next. Nothing to do: the scene's context is
+        current only inside its own calls, which leave no context current behind them."""
 
     def close(self) -> None:
         """Free the OpenGL context and buffers (idempotent)."""

@@ -433,6 +433,7 @@ def test_live_mode_follows_every_frame_and_repeats_the_pictures_it_drops():
     assert "real time: every frame followed and simulated" in report.format()
 
 
+@pytest.mark.slow
 def test_a_late_frame_is_caught_up_at_its_own_time_not_skipped():
     replayed, reference = standin_session("replay", delay=0.0)
     replayed.run(duration=2.0)
@@ -446,6 +447,7 @@ def test_a_late_frame_is_caught_up_at_its_own_time_not_skipped():
     assert "caught up" in report.verdict()
 
 
+@pytest.mark.slow
 def test_a_machine_too_slow_for_the_rate_is_reported_plainly():
     always = (lambda step: True, 0.06)             # the simulation alone takes 1.5 periods
     session, recorder = standin_session("live", delay=0.0, pause=always, max_lag=0.2)

@@ -9,6 +9,8 @@ from mop.session import load_session
 from mop.session.build import Overrides, build_session
 from session_files import script_times, show_takes
 
+pytestmark = pytest.mark.slow   # whole sessions built and replayed
+
 SCRIPT = [(None, 1.0), ("chomp", 1.0), (None, 2.0), ("ripple", 0.75), (None, 2.0),
           ("chomp", 1.3), (None, 2.0)]
 TIMES = script_times("glove", SCRIPT)

@@ -110,6 +110,7 @@ class PreviewOutput:
         self._state_json: tuple[int, float, bytes] | None = None
         self._last_encoded = -math.inf
         self._rgb: np.ndarray | None = None
+        self._bgr: np.ndarray | None = None
         self.requests: dict[str, int] = {}
         self.frames = 0
         self.closed = False
@@ -143,14 +144,13 @@ class PreviewOutput:
     def _encode(self, frame: np.ndarray) -> bytes:
         """JPEG of an RGBA frame; transparent parts over dark grey."""
         import cv2
+
+        from mop.export import over_colour
         if self._rgb is None or self._rgb.shape[:2] != frame.shape[:2]:
             self._rgb = np.empty(frame.shape[:2] + (3,), np.uint8)
-        bgr = self._rgb
-        cv2.cvtColor(frame, cv2.COLOR_RGBA2BGR, dst=bgr)
-        alpha = frame[..., 3]
-        if alpha.min() < 255:
-            weight = alpha[..., None].astype(np.uint32)
-            bgr[...] = (bgr * weight + 40 * (255 - weight) + 127) // 255
+            self._bgr = np.empty_like(self._rgb)
+        over_colour(frame, (40, 40, 40), out=self._rgb)
+        bgr = cv2.cvtColor(self._rgb, cv2.COLOR_RGB2BGR, dst=self._bgr)
         ok, data = cv2.imencode(".jpg", bgr, [cv2.IMWRITE_JPEG_QUALITY, self.jpeg_quality])
         if not ok:
             raise RuntimeError("JPEG encoding of the preview frame failed")

@@ -26,8 +26,8 @@ KINDS = ("characters.image", "characters.latex", "characters.medial")
 LAYERS = {
     "capture": [
         ["capture.frame", "capture.clock", "capture.resample", "capture.store",
-         "capture.profiles", "capture.hid.parse", "capture.hid.profile",
-         "capture.camera.trackers"],
+         "capture.profiles", "capture.hid.parse", "capture.hid.profile", "capture.hid.status",
+         "capture.hid.calibration", "capture.camera.trackers"],
         ["capture.source"],
         ["capture.osc", "capture.replay", "capture.hid.source", "capture.camera.source"],
         ["capture.spec", "capture.devices"],
@@ -52,7 +52,7 @@ LAYERS = {
         ["mop.export", "mop.render.compose", "mop.takes", "mop.session.config",
          "mop.session.timing", "mop.session.feeds"],
         ["mop.render.image2d", "mop.render.scene3d", "mop.session.loop", "mop.session.outputs",
-         "mop.session.preview", "mop.session.puppets"],
+         "mop.session.preview", "mop.session.puppets", "mop.session.worker"],
         ["mop.session.build"],
         ["mop.commands.*", "mop.cli"],
     ],

@@ -115,7 +115,10 @@ def _imports(module: str) -> dict[str, int]:
     return found
 
 
-GRAPH = {module: _imports(module) for module in MODULES}
+@pytest.fixture(scope="module")
+def graph() -> dict[str, dict[str, int]]:
+    """{module: {module of ours it imports: line}} for every module (parsed when first asked)."""
+    return {module: _imports(module) for module in MODULES}
 
 
 def _layer(module: str) -> int | None:
@@ -131,17 +134,17 @@ def _where(module: str, line: int) -> str:
     return f"{MODULES[module].relative_to(ROOT)}:{line}"
 
 
-def test_the_libraries_never_import_each_other_nor_mop():
+def test_the_libraries_never_import_each_other_nor_mop(graph):
     wrong = [f"{_where(m, line)} {m} imports {target}"
-             for m, imported in GRAPH.items() if m.split(".")[0] in LIBRARIES
+             for m, imported in graph.items() if m.split(".")[0] in LIBRARIES
              for target, line in imported.items()
              if target.split(".")[0] != m.split(".")[0]]
     assert not wrong, "\n".join(wrong)
 
 
-def test_low_modules_never_import_high_ones():
+def test_low_modules_never_import_high_ones(graph):
     wrong = []
-    for module, imported in GRAPH.items():
+    for module, imported in graph.items():
         low = _layer(module)
         if low is None:
             continue
@@ -163,9 +166,9 @@ def test_the_layers_name_modules_that_exist():
                 assert name in MODULES, f"LAYERS names {entry}, which is not a module"
 
 
-def test_puppet_kinds_are_siblings_and_their_runtime_is_on_top():
+def test_puppet_kinds_are_siblings_and_their_runtime_is_on_top(graph):
     wrong = []
-    for module, imported in GRAPH.items():
+    for module, imported in graph.items():
         kind = next((k for k in KINDS if module == k or module.startswith(k + ".")), None)
         if kind is None:
             continue
@@ -178,11 +181,11 @@ def test_puppet_kinds_are_siblings_and_their_runtime_is_on_top():
     assert not wrong, "\n".join(wrong)
 
 
-def test_the_checker_sees_relative_and_function_level_imports():
+def test_the_checker_sees_relative_and_function_level_imports(graph):
     # characters.latex.puppet: `from . import connection` at the top, and
     # characters.assets.caterpillar: `from ..motion import Motion` inside a function
-    assert "characters.latex.connection" in GRAPH["characters.latex.puppet"]
-    assert "characters.motion" in GRAPH["characters.assets.caterpillar"]
+    assert "characters.latex.connection" in graph["characters.latex.puppet"]
+    assert "characters.motion" in graph["characters.assets.caterpillar"]
 
 
 @pytest.mark.parametrize("package", LIBRARIES)

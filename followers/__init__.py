@@ -11,8 +11,10 @@ __getattr__, __dir__, __all__ = lazy_loader.attach(__name__, submod_attrs={
     "follower": ["Follower", "FollowerOutput", "FollowerTrace"],
     # transition models
     "transitions": ["TransitionModel", "transition_model"],
+    # every tuning number
+    "config": ["FollowerConfig", "BankConfig"],
     # the bank of one performer
-    "bank": ["FollowerBank", "BankOutput"],
+    "bank": ["FollowerBank", "BankOutput", "BankTrace"],
     # preparing demonstrations (MOP 3.1.3)
     "preprocessing": ["ChannelNormaliser", "fit_normaliser", "normalise", "align", "resample",
                       "fill_gaps", "time_warp"],

@@ -1,17 +1,28 @@
-"""Numba kernel of the bank's per-frame decision: posterior, fit, rejection, hysteresis.
+"""Numba kernels of a bank's frame: its followers, its outline models, and the decision.
 
-Everything is written into preallocated arrays; ``state (4,) int64`` holds
-``[active action (-1 = none), best action, frames seen, frames since the active action changed]``.
+A ``BankModel`` (built once, see ``followers.bank_model``) and a ``BankState`` (changed every
+frame) sit beside the followers' ``ForwardModel`` / ``ForwardState``. One frame
+(``bank_step``): the followers (``_kernels.forward_step``), the outline models
+(``outline_step``), then the decision in stages: ``_evidence`` (the posterior's running
+evidence), ``_fits`` (the rejection's fit against the background model), ``_pace`` (an
+optional term of the fit), ``_posterior``, ``_decide`` (rejection and switch hysteresis);
+then the recognition mixture's weight is learned (``learn_mixture``) and the shown action's
+follower gets its own restart rate (``gate``).
+
+``state.decision (4,) int64``: [active action (-1 = none), best action, frames seen, frames
+since the active action changed].
 """
 from __future__ import annotations
 
 import math
 
-import numba as nb
 import numpy as np
 
+from followers._jit import inline, kernel
+from followers._kernels import forward_step, main_progress
 
-@nb.njit(cache=True, fastmath={"reassoc", "contract"})
+
+@kernel
 def capped_log_density(xs, observed, mean, inv_var, log_norm, cap):
     """log of a diagonal Gaussian at the cleaned frame ``xs (D,)``, over its observed channels
     (``observed (D,)`` 1 or 0; missing channels have xs 0), each squared z-score capped at
@@ -25,42 +36,45 @@ def capped_log_density(xs, observed, mean, inv_var, log_norm, cap):
     return total
 
 
-@nb.njit(cache=True, fastmath={"reassoc", "contract"})
-def outline_step(xs, observed, n_obs, mean, inv_var, log_norm, cap, restart, alpha, scratch,
-                 frame_ll, total_ll, fresh):
-    """One frame of every action's outline model: a left-to-right HMM of S states (stay or move
-    on with probability 0.5 each, the last state absorbing; then, with probability ``restart``,
-    back to the first state: a new repetition), one diagonal Gaussian per state.
+@inline
+def _outline_predict(alpha, k, restart):
+    """Stay or move on with probability 0.5 each (the last state absorbing), then with
+    probability ``restart`` back to the first state (a new repetition, or an action taken up
+    after another one)."""
+    S = alpha.shape[1]
+    if S > 1:
+        # from the last state down, so that alpha[s - 1] is still the old value
+        alpha[k, S - 1] += 0.5 * alpha[k, S - 2]
+        for s in range(S - 2, 0, -1):
+            alpha[k, s] = 0.5 * (alpha[k, s] + alpha[k, s - 1])
+        alpha[k, 0] *= 0.5
+        for s in range(S):
+            alpha[k, s] *= 1.0 - restart
+        alpha[k, 0] += restart
 
-    xs (D,) float, observed (D,) float, n_obs: the cleaned frame (see ``_kernels.prepare_frame``;
-        n_obs = 0 only predicts); mean, inv_var, log_norm (K, S, D) float: each state's mean,
-        1 / variance and -0.5 log(2 pi variance); cap: squared z-scores are capped at it
-    alpha (K, S) float in/out: normalised forward variables; scratch (S,) float
-    frame_ll (K,) float out: log-likelihood of this frame given the past (0 when n_obs = 0);
-    total_ll (K,) float in/out: its sum since reset
-    fresh (1,) bool in/out: True until the first frame, which the first state emits (the reset
-        puts alpha there) without a transition before it
-    """
+
+@kernel
+def outline_step(fmodel, fstate, bmodel, bstate, n_obs):
+    """One frame of every action's outline model: a left-to-right HMM of S states over
+    stretches of its template, one diagonal Gaussian per state. Writes ``outline_ll (K,)``
+    (this frame's log-likelihood given the past; 0 when n_obs = 0) and adds it to
+    ``outline_total``. The first frame after a reset is emitted by the first state without a
+    transition before it."""
+    alpha, scratch = bstate.outline_alpha, bstate.outline_scratch
+    mean, inv_var, log_norm = bmodel.outline_mean, bmodel.outline_inv_var, bmodel.outline_log_norm
     K, S = alpha.shape
-    predict = not fresh[0]
-    fresh[0] = False
+    predict = not bstate.outline_fresh[0]
+    bstate.outline_fresh[0] = False
     for k in range(K):
-        # predict, from the last state down so that alpha[s - 1] is still the old value
-        if predict and S > 1:
-            alpha[k, S - 1] += 0.5 * alpha[k, S - 2]
-            for s in range(S - 2, 0, -1):
-                alpha[k, s] = 0.5 * (alpha[k, s] + alpha[k, s - 1])
-            alpha[k, 0] *= 0.5
-            # a new repetition (or an action taken up after another one) can begin at any frame
-            for s in range(S):
-                alpha[k, s] *= 1.0 - restart
-            alpha[k, 0] += restart
+        if predict:
+            _outline_predict(alpha, k, bmodel.outline_restart)
         if n_obs == 0:
-            frame_ll[k] = 0.0
+            bstate.outline_ll[k] = 0.0
             continue
         top = -np.inf
         for s in range(S):
-            b = capped_log_density(xs, observed, mean[k, s], inv_var[k, s], log_norm[k, s], cap)
+            b = capped_log_density(fstate.xs, fstate.observed, mean[k, s], inv_var[k, s],
+                                   log_norm[k, s], fmodel.cap)
             scratch[s] = b
             if alpha[k, s] > 0.0 and b > top:
                 top = b
@@ -71,208 +85,220 @@ def outline_step(xs, observed, n_obs, mean, inv_var, log_norm, cap, restart, alp
             total += v
         for s in range(S):
             alpha[k, s] /= total
-        frame_ll[k] = math.log(total) + top
-        total_ll[k] += frame_ll[k]
+        bstate.outline_ll[k] = math.log(total) + top
+        bstate.outline_total[k] += bstate.outline_ll[k]
 
 
-@nb.njit(cache=True)
-def learn_mixture(log_share, posterior, n_obs, decay, lowest, highest, state):
-    """One EM step, with forgetting, on the weight of the recognition mixture's narrow component
-    (an exact repetition of the demonstration) after a frame.
-
-    log_share (K,) float: each follower's log share of this frame's recognition score that the
-        narrow component explains (``frame_loglik[2]``); posterior (K,) float: the posterior
-        over actions after this frame; n_obs: observed channels (0: the frame says nothing,
-        nothing changes)
-    decay : float in (0, 1): forgetting factor per frame; lowest, highest: the weight's range
-    state (2,) float in/out: [weight, forgetful count of the frames behind it]
-    Returns the new weight: the posterior-weighted share, averaged over recent frames with
-    the count as the averaging weight (a reset puts the starting weight and its prior count).
-    """
-    if n_obs == 0:
-        return state[0]
-    share = 0.0
-    for k in range(posterior.shape[0]):
-        share += posterior[k] * math.exp(log_share[k])
-    state[1] = decay * state[1] + 1.0
-    weight = state[0] + (share - state[0]) / state[1]
-    state[0] = min(max(weight, lowest), highest)
-    return state[0]
-
-
-@nb.njit(cache=True)
-def bank_decide(frame_loglik, outline_ll, outline_weight, outline_fit_margin, xs, observed,
-                n_obs, background_mean,
-                background_weight, background_log_norm, cap, decay, fit_decay, evidence_cap,
-                lead_cap, lead_cap_at_end, fit_floor, recent, fit, likelihood_fit, fit_weight, pace,
-                last_position, last_main, since_end, end_fraction, pace_floor, pace_decay,
-                pace_reference, pace_weight, posterior, thresholds, enter_margin, leave_margin,
-                switch_margin, state, moments, main, lengths, progress, variance):
-    """Update the bank's decision after one frame.
-
-    frame_loglik (3, K) float: each follower's log-likelihood of this frame under its own
-        emission model (row 0) and its recognition model (row 1, what the bank uses; row 2 is
-        read by ``learn_mixture``)
-    outline_ll (K,) float, outline_weight : float >= 0: each action's outline-model frame
-        log-likelihood (``outline_step``) and its weight in the posterior's evidence
-    outline_fit_margin : float >= 0 [nats per channel] or inf: in ``fit`` a frame counts as
-        the better of its follower's score and its outline model's less this margin per
-        observed channel (inf: the follower's alone)
-    xs (D,) float: the cleaned frame; observed (D,) float: 1 or 0 (see ``_kernels.prepare_frame``)
-    n_obs : int: observed channels this frame (0: the frame says nothing, nothing changes)
-    background_mean, background_weight, background_log_norm (D,) float: the background model, one
-        Gaussian over every frame of every template (mean, 1 / variance, -0.5 log(2 pi var));
-        cap: the followers' outlier cap [squared sigmas], applied to it too
-    decay : float in (0, 1]: forgetting factor of ``recent`` per frame (exp(-1 / memory);
-        1 = no forgetting, the lead cap alone lets a new action take over)
-    fit_decay : float in (0, 1): forgetting factor of ``fit`` per frame
-    evidence_cap, lead_cap, lead_cap_at_end : float > 0 [nats]: one frame can count at most
-        ``evidence_cap`` against a follower (relative to the frame's best), and no follower
-        trails the leader by more than ``lead_cap`` in ``recent``, or ``lead_cap_at_end`` while
-        the leader's follower is at the end of its template (``progress >= end_fraction``: its
-        action performed, the next one may begin). An action that was wrong for a long time
-        thus owes little, and a switch is followed as soon as the new action has been clearly
-        better for a few frames, while one odd frame cannot flip the decision.
-    fit_floor : float [nats per channel]: one frame counts at most this low in ``fit``, for
-        the same reason (an action that was badly rejected recovers within a few frames)
-    recent (K,) float in/out: forgetful sum of frame log-likelihoods relative to each frame's
-        best follower, bounded as above, then shifted so that the leader is at 0 (<= 0 each)
-    likelihood_fit (K,) float in/out: forgetful mean over frames of the per-channel
-        log-likelihood ratio of each follower against the background model [nats per channel
-        per frame]
-    fit_weight (1,) float in/out: normaliser of that mean
-    pace (K,) float in/out: forgetful mean of each follower's forward advance per frame
-        [states per frame] (time constant 1 / (1 - pace_decay) frames; starts at
-        ``pace_reference``); last_position (K,) float in/out: main-track mean state last frame;
-        last_main (K,) int64 in/out: each follower's main track last frame (a change: a new
-        repetition began); since_end (K,) float in/out: frames since the follower's progress
-        last reached ``end_fraction`` (its mean rarely sits on the last state itself). These
-        four are only updated when pace_weight > 0.
-    end_fraction : float in (0, 1]: progress from which a follower has performed its action
-    pace_floor : float > 0 [states per frame]: ``pace`` never falls below it
-    pace_decay : float in [0, 1); pace_reference : float > 0 [states per frame];
-        pace_weight : float >= 0 [nats per channel per frame]: the progress-plausibility term
-        (see ``FollowerBank``): ``pace_weight * min(0, log(pace / pace_reference))``
-    fit (K,) float out: ``likelihood_fit`` plus that (non-positive) term: what the rejection
-        compares with ``thresholds``
-    posterior (K,) float out: softmax of ``recent``
-    thresholds (K,) float: a follower accepts the input when ``fit >= threshold``
-    enter_margin, leave_margin : float >= 0: hysteresis on the rejection (to become active an
-        action needs fit >= threshold + enter_margin; it stays active while
-        fit >= threshold - leave_margin)
-    switch_margin : float >= 0 [nats]: how far another action's ``recent`` must exceed the
-        active one's for it to take over
-    moments (K, 2, 3), main (K,), lengths (K,): the engine's tracks (see ``_kernels``)
-    progress, variance (K,) float out: each follower's main-track progress [0, 1] and variance
-    """
-    K = frame_loglik.shape[1]
-    for k in range(K):
-        span = lengths[k] - 1.0
-        t = main[k]
-        progress[k] = moments[k, t, 1] / span  # a division: exactly 1 at the end
-        variance[k] = moments[k, t, 2] / (span * span)
+@kernel
+def learn_mixture(fstate, bmodel, bstate, n_obs):
+    """One EM step, with forgetting, on the weight of the recognition mixture's exact
+    component after a frame: a forgetful mean (``bmodel.mixture_decay`` per frame) of the
+    posterior-weighted share of the frame's score that the component explains, its count in
+    ``bstate.mixture_state[1]``, kept within the model's range. Sets ``fstate.mixture[0]``
+    for the next frame; a frame with nothing observed changes nothing."""
+    state = bstate.mixture_state
     if n_obs > 0:
-        # the pace is only followed when it counts (pace_weight > 0: off by default)
-        if pace_weight > 0.0:
-            for k in range(K):
-                position = progress[k] * (lengths[k] - 1)
-                step = position - last_position[k]
-                restarted = main[k] != last_main[k]
-                last_main[k] = main[k]
-                if step < 0.0:
-                    # a hesitation is no evidence of advancing
-                    step = 0.0
-                if progress[k] >= end_fraction:
-                    since_end[k] = 0.0
-                else:
-                    since_end[k] += 1.0
-                if since_end[k] <= lengths[k]:
-                    # a follower that reached the end of its template has performed the whole
-                    # action: holding the end pose (which often resembles the first, so a new
-                    # repetition takes over) is not being stuck, for as long as the action took
-                    step = pace_reference
-                last_position[k] = position
-                if restarted:
-                    # a new repetition took over: it is judged afresh
-                    pace[k] = pace_reference
-                pace[k] = pace_decay * pace[k] + (1.0 - pace_decay) * step
-                if pace[k] < pace_floor:
-                    # bounded, so that an action that was idle for long is judged afresh within a
-                    # few frames once it is performed (a switch from another action)
-                    pace[k] = pace_floor
-        background = capped_log_density(xs, observed, background_mean, background_weight,
-                                        background_log_norm, cap)
-        fit_weight[0] = fit_decay * fit_weight[0] + 1.0
-        inv_w = 1.0 / fit_weight[0]
-        frame_best = -np.inf
-        for k in range(K):
-            score = frame_loglik[1, k] + outline_weight * outline_ll[k]
-            if score > frame_best:
-                frame_best = score
-        leader = -np.inf
-        leading = 0
-        for k in range(K):
-            value = frame_loglik[1, k]
-            evidence = value + outline_weight * outline_ll[k] - frame_best
-            if evidence < -evidence_cap:
-                evidence = -evidence_cap
-            recent[k] = decay * recent[k] + evidence
-            if recent[k] > leader:
-                leader = recent[k]
-                leading = k
-            # the outline model, less a margin: an irregular repetition of the action (a take
-            # of another session) that its follower loses track of is still the action
-            explained = outline_ll[k] - outline_fit_margin * n_obs
-            if value > explained:
-                explained = value
-            per_channel = (explained - background) / n_obs
-            if per_channel < fit_floor:
-                per_channel = fit_floor
-            likelihood_fit[k] = likelihood_fit[k] + (per_channel - likelihood_fit[k]) * inv_w
-        for k in range(K):
-            # a performance of the action advances through its template; an input that a stretch
-            # of it merely resembles (a rest pose) keeps the follower stuck there
-            penalty = pace_weight * math.log(pace[k] / pace_reference) if pace_weight > 0.0 \
-                else 0.0
-            fit[k] = likelihood_fit[k] + (penalty if penalty < 0.0 else 0.0)
-        # relative to the leader: without forgetting (decay 1) the sums would drift without bound.
-        # In the middle of the leader's action the others may trail further: a performer
-        # rarely abandons a gesture halfway, and another performer's take is decided by all
-        # of its middle
-        limit = lead_cap_at_end if progress[leading] >= end_fraction else lead_cap
-        for k in range(K):
-            if recent[k] < leader - limit:
-                recent[k] = leader - limit
-            recent[k] -= leader
-        state[2] += 1
+        share = 0.0
+        for k in range(bstate.posterior.shape[0]):
+            share += bstate.posterior[k] * math.exp(fstate.frame_loglik[2, k])
+        state[1] = bmodel.mixture_decay * state[1] + 1.0
+        weight = state[0] + (share - state[0]) / state[1]
+        state[0] = min(max(weight, bmodel.mixture_lowest), bmodel.mixture_highest)
+    fstate.mixture[0] = state[0]
+
+
+@inline
+def progress_of_all(fmodel, fstate, bstate):
+    for k in range(bstate.progress.shape[0]):
+        bstate.progress[k], bstate.variance[k] = main_progress(fmodel.lengths, fstate.moments,
+                                                               fstate.main, k)
+
+
+@inline
+def _pace(fmodel, fstate, bmodel, bstate):
+    """The forgetful mean of each follower's forward advance per frame [states per frame]:
+    a hesitation is no evidence of advancing; a follower that reached ``end_fraction`` of its
+    template is not judged for as many frames as the template is long (holding the end pose
+    is not being stuck); a new repetition is judged afresh; never below ``pace_floor``."""
+    lengths, reference = fmodel.lengths, bmodel.pace_reference
+    for k in range(lengths.shape[0]):
+        position = bstate.progress[k] * (lengths[k] - 1)
+        step = max(position - bstate.last_position[k], 0.0)
+        restarted = fstate.main[k] != bstate.last_main[k]
+        bstate.last_main[k] = fstate.main[k]
+        if bstate.progress[k] >= bmodel.end_fraction:
+            bstate.since_end[k] = 0.0
+        else:
+            bstate.since_end[k] += 1.0
+        if bstate.since_end[k] <= lengths[k]:
+            step = reference
+        bstate.last_position[k] = position
+        if restarted:
+            bstate.pace[k] = reference
+        pace = bmodel.pace_decay * bstate.pace[k] + (1.0 - bmodel.pace_decay) * step
+        bstate.pace[k] = max(pace, bmodel.pace_floor)
+
+
+@inline
+def _evidence(fstate, bmodel, bstate):
+    """Each action's frame score (recognition log-likelihood plus ``outline_weight`` times the
+    outline model's) relative to the frame's best, at most ``evidence_cap`` against it, added
+    to its forgetful sum ``recent``. Returns the leader."""
+    K = bstate.recent.shape[0]
+    score, outline, w = fstate.frame_loglik[1], bstate.outline_ll, bmodel.outline_weight
+    frame_best = -np.inf
+    for k in range(K):
+        frame_best = max(frame_best, score[k] + w * outline[k])
+    leader = -np.inf
+    leading = 0
+    for k in range(K):
+        evidence = max(score[k] + w * outline[k] - frame_best, -bmodel.evidence_cap)
+        bstate.recent[k] = bmodel.decay * bstate.recent[k] + evidence
+        if bstate.recent[k] > leader:
+            leader = bstate.recent[k]
+            leading = k
+    return leading
+
+
+@inline
+def _fits(fstate, bmodel, bstate, n_obs, cap):
+    """The rejection's fit: a forgetful mean (``fit_decay``) of each follower's log-likelihood
+    ratio against the background model per observed channel [nats per channel per frame],
+    each frame counting at least ``fit_floor``; a frame counts as the better of the follower's
+    score and its outline model's less ``outline_fit_margin`` per channel (an irregular
+    repetition its follower loses track of is still the action); minus the pace term."""
+    background = capped_log_density(fstate.xs, fstate.observed, bmodel.background_mean,
+                                    bmodel.background_weight, bmodel.background_log_norm, cap)
+    bstate.fit_weight[0] = bmodel.fit_decay * bstate.fit_weight[0] + 1.0
+    inv_w = 1.0 / bstate.fit_weight[0]
+    for k in range(bstate.fit.shape[0]):
+        explained = max(fstate.frame_loglik[1, k],
+                        bstate.outline_ll[k] - bmodel.outline_fit_margin * n_obs)
+        per_channel = max((explained - background) / n_obs, bmodel.fit_floor)
+        mean = bstate.likelihood_fit[k]
+        bstate.likelihood_fit[k] = mean + (per_channel - mean) * inv_w
+        penalty = 0.0
+        if bmodel.pace_weight > 0.0:
+            penalty = min(bmodel.pace_weight * math.log(bstate.pace[k] / bmodel.pace_reference),
+                          0.0)
+        bstate.fit[k] = bstate.likelihood_fit[k] + penalty
+
+
+@inline
+def _bound_lead(bmodel, bstate, leading):
+    """No action trails the leader by more than the lead cap (``lead_cap_at_end`` once the
+    leader's follower is at its end: a performer rarely abandons a gesture halfway, and
+    another performer's take is decided by all of its middle); the leader at 0."""
+    leader = bstate.recent[leading]
+    limit = bmodel.lead_cap_at_end if bstate.progress[leading] >= bmodel.end_fraction \
+        else bmodel.lead_cap
+    for k in range(bstate.recent.shape[0]):
+        bstate.recent[k] = max(bstate.recent[k], leader - limit) - leader
+
+
+@inline
+def _posterior(bstate):
+    """Softmax of ``recent``; returns the best action."""
+    recent, posterior = bstate.recent, bstate.posterior
     best = 0
     top = recent[0]
-    for k in range(1, K):
+    for k in range(1, recent.shape[0]):
         if recent[k] > top:
             top = recent[k]
             best = k
     total = 0.0
-    for k in range(K):
+    for k in range(recent.shape[0]):
         v = math.exp(recent[k] - top)
         posterior[k] = v
         total += v
-    for k in range(K):
+    for k in range(recent.shape[0]):
         posterior[k] /= total
-    state[1] = best
-    if state[2] == 0:
-        return
-    active = state[0]
+    return best
+
+
+@inline
+def _decide(bmodel, bstate, best):
+    """Rejection and switch hysteresis: an action becomes active when its fit reaches its
+    threshold plus ``enter_margin``, stays while above the threshold less ``leave_margin``,
+    and another one takes over when its evidence is ``switch_margin`` ahead and it may
+    enter."""
+    decision, fit, threshold = bstate.decision, bstate.fit, bmodel.thresholds
+    active = decision[0]
     new = active
+    enters = fit[best] >= threshold[best] + bmodel.enter_margin
     if active >= 0:
-        if fit[active] < thresholds[active] - leave_margin:
+        if fit[active] < threshold[active] - bmodel.leave_margin:
             new = -1
-        if best != active and recent[best] - recent[active] >= switch_margin and \
-                fit[best] >= thresholds[best] + enter_margin:
+        if best != active and bstate.recent[best] - bstate.recent[active] >= \
+                bmodel.switch_margin and enters:
             new = best
-    elif fit[best] >= thresholds[best] + enter_margin:
+    elif enters:
         new = best
     if new != active:
-        state[0] = new
-        state[3] = 0
+        decision[0] = new
+        decision[3] = 0
     else:
-        state[3] += 1
+        decision[3] += 1
+
+
+@kernel
+def gate(fstate, bmodel, bstate, shown):
+    """Settings for the next frame that depend on the shown action (-1: none): its follower
+    restarts from anywhere at ``active_restart``, every other one at ``idle_restart``; only
+    its follower places the position inside each state's cell (``subframe``: what is
+    reported, at a cost per frame as large as the emission's when a posterior is spread)."""
+    for k in range(fstate.restart.shape[0]):
+        fstate.restart[k, 0] = bmodel.idle_restart
+        fstate.subframe[k] = False
+    if shown >= 0:
+        fstate.restart[shown, 0] = bmodel.active_restart
+        fstate.subframe[shown] = bmodel.subframe
+    bstate.gated[0] = shown
+
+
+@kernel
+def decide(fmodel, fstate, bmodel, bstate, n_obs):
+    """The bank's decision after its followers and outline models saw a frame."""
+    progress_of_all(fmodel, fstate, bstate)
+    if n_obs > 0:
+        if bmodel.pace_weight > 0.0:
+            _pace(fmodel, fstate, bmodel, bstate)
+        leading = _evidence(fstate, bmodel, bstate)
+        _fits(fstate, bmodel, bstate, n_obs, fmodel.cap)
+        _bound_lead(bmodel, bstate, leading)
+        bstate.decision[2] += 1
+    best = _posterior(bstate)
+    bstate.decision[1] = best
+    if bstate.decision[2] > 0:
+        _decide(bmodel, bstate, best)
+
+
+@kernel
+def bank_step(fmodel, fstate, bmodel, bstate, x):
+    """One frame ``x (D,)`` (raw input) for the whole bank. Returns the shown action's index
+    (the active one, or the best while none is accepted)."""
+    n_obs = forward_step(fmodel, fstate, x)
+    outline_step(fmodel, fstate, bmodel, bstate, n_obs)
+    decide(fmodel, fstate, bmodel, bstate, n_obs)
+    if bmodel.learn_mixture:
+        learn_mixture(fstate, bmodel, bstate, n_obs)
+    shown = bstate.decision[0] if bstate.decision[0] >= 0 else bstate.decision[1]
+    if shown != bstate.gated[0]:
+        gate(fstate, bmodel, bstate, shown)
+    return shown
+
+
+@kernel
+def bank_run(fmodel, fstate, bmodel, bstate, X, trace):
+    """``bank_step`` over the rows of ``X (N, D)``, what it said into ``trace`` (a
+    ``bank.BankTrace`` of (N,) and (N, K) arrays)."""
+    for n in range(X.shape[0]):
+        shown = bank_step(fmodel, fstate, bmodel, bstate, X[n])
+        trace.action[n] = bstate.decision[0]
+        trace.progress[n] = bstate.progress[shown]
+        trace.variance[n] = bstate.variance[shown]
+        for k in range(bstate.progress.shape[0]):
+            trace.progresses[n, k] = bstate.progress[k]
+            trace.posteriors[n, k] = bstate.posterior[k]
+            trace.log_likelihoods[n, k] = fstate.loglik[k]
+            trace.fits[n, k] = bstate.fit[k]

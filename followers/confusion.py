@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from followers.bank import FIT_MEMORY, FollowerBank
+from followers.bank import FollowerBank
 from followers.preprocessing import time_warp
 
 CONFUSABILITY_SPEEDS = (0.7, 1.0, 1.4)
@@ -95,7 +95,7 @@ def confusability(templates, *, speeds=CONFUSABILITY_SPEEDS, **bank_options) -> 
     accepted = np.zeros((A, A))
     decided = np.zeros((A, A + 1))
     # the first frames only fill the rejection's memory: count from there
-    skip = int(np.ceil(FIT_MEMORY))
+    skip = int(np.ceil(bank.config.fit_memory))
     for i, name in enumerate(names):
         demo = bank.template(name)
         frames = 0

@@ -1,22 +1,22 @@
 """Defaults estimated from the templates themselves, and template validation.
 
-- **sigma** (per channel, the same for every state): ``SIGMA_FRACTION`` (0.25) times the
-  channel's standard deviation over all frames of the template (of all templates, in a bank),
-  floored at ``SIGMA_FLOOR`` (0.05) times the root-mean-square of those deviations (so a channel
-  that never moves in the demonstration does not make every other value impossible), and 1.0
-  when the template does not move at all. A performer repeating a demonstration rarely differs
-  from it by less than a quarter of the channel's range of motion; a much smaller sigma makes
-  the follower brittle, a much larger one blurs positions (measured on GunPoint: 0.15-0.4 all
-  give median errors near 1 %).
-- **exact-repetition sigma** (a bank's recognition mixture, per channel): the template's own
-  noise, from its second differences (``noise_sigma``), clipped to [``EXACT_FLOOR`` (0.25), 1]
-  times the default sigma (``exact_scale``): a take replayed by its performer differs from the
-  demonstration by about the sensor's noise.
-- **window** (half-width p, in states): ``ceil(WINDOW_FRACTION * T)`` (a fifth of the
-  template), at least ``WINDOW_MIN`` (8) and at most T. The posterior of a follower that is on
-  track is a few states wide; p only has to hold it through ambiguous stretches (a held pose),
-  which in demonstrations of gestures rarely exceed a fifth of the template. With the default
-  ``"speed"`` transitions, beam pruning then keeps only the states that matter inside it.
+- **sigma** (per channel, the same for every state): ``sigma_fraction`` times the channel's
+  standard deviation over all frames of the template (of all templates, in a bank), the
+  spread floored at ``sigma_floor`` times the root-mean-square spread over channels (so a
+  channel that never moves in the demonstration does not make every other value
+  impossible), and 1.0 when the template does not move at all. A performer repeating a
+  demonstration rarely differs from it by less than a quarter of the channel's range of
+  motion; a much smaller sigma makes the follower brittle, a much larger one blurs positions.
+- **recognition sigma** (a bank): at least ``recognition_floor`` of each template's own
+  channel spread: another performance of an action differs from the demonstration in
+  intensity as well as timing.
+- **exact-repetition scale** (a bank): the template's own noise from its second differences
+  (``noise_sigma``), within [``exact_floor``, 1] times the default sigma.
+- **window** (half-width p, in states): ``ceil(window_fraction * T)``, at least ``window_min``
+  and at most T. The posterior of a follower on track is a few states wide; p only has to
+  hold it through ambiguous stretches (a held pose).
+
+Every number here is a field of ``FollowerConfig`` or ``BankConfig``.
 """
 from __future__ import annotations
 
@@ -24,13 +24,9 @@ import math
 
 import numpy as np
 
-SIGMA_FRACTION = 0.25
-SIGMA_FLOOR = 0.05
-LOCAL_FRACTION = 0.05
-RECOGNITION_FRACTION = 0.5
-EXACT_FLOOR = 0.25
-WINDOW_FRACTION = 0.2
-WINDOW_MIN = 8
+from followers.config import FollowerConfig
+
+_DEFAULT = FollowerConfig()
 
 
 def as_template(template, *, name: str = "template") -> np.ndarray:
@@ -56,20 +52,6 @@ def as_template(template, *, name: str = "template") -> np.ndarray:
     return arr
 
 
-def local_variance(template: np.ndarray, half: int) -> np.ndarray:
-    """Variance of each channel over frames ``t - half .. t + half`` (clipped at the ends).
-
-    template : (T, D) float. Returns (T, D) float [input units squared]."""
-    T = template.shape[0]
-    c1 = np.vstack([np.zeros((1, template.shape[1])), np.cumsum(template, axis=0)])
-    c2 = np.vstack([np.zeros((1, template.shape[1])), np.cumsum(template ** 2, axis=0)])
-    lo = np.clip(np.arange(T) - half, 0, T)
-    hi = np.clip(np.arange(T) + half + 1, 0, T)
-    n = (hi - lo)[:, None]
-    mean = (c1[hi] - c1[lo]) / n
-    return np.maximum((c2[hi] - c2[lo]) / n - mean ** 2, 0.0)
-
-
 def channel_spread(templates: list[np.ndarray]) -> np.ndarray:
     """(D,) float: standard deviation of each channel over every frame of the templates
     (computed from per-template sums, without stacking them)."""
@@ -80,42 +62,35 @@ def channel_spread(templates: list[np.ndarray]) -> np.ndarray:
     return np.sqrt(square / count)
 
 
-def default_sigma(template: np.ndarray, *, pooled: list[np.ndarray] | None = None,
-                  local: float = 0.0) -> np.ndarray:
-    """Per-state, per-channel sigma estimated from a template.
-
-    template : (T, D) float (validated); pooled : optional list of (T_k, D) templates whose
-    channel spreads set the base level (a bank passes all its templates, so every follower
-    measures distance the same way). local : float >= 0: also add this times the template's
-    local variance over +-``LOCAL_FRACTION`` of its length (0, the default, for gestures; about
-    1 suits repetitive activities, whose repetitions never line up frame by frame, at the cost
-    of blurrier positions). Returns (T, D) float [input units]."""
-    spread = channel_spread(pooled if pooled else [template])
+def pooled_sigma(templates: list[np.ndarray], config: FollowerConfig = _DEFAULT) -> np.ndarray:
+    """(D,) float [input units]: the default sigma per channel from the spread of all
+    ``templates`` together (see the module docstring)."""
+    spread = channel_spread(templates)
     rms = float(np.sqrt(np.mean(spread ** 2)))
     if rms <= 0.0:
-        return np.ones_like(template)
-    base = SIGMA_FRACTION * np.maximum(spread, SIGMA_FLOOR * rms)
-    var = np.broadcast_to(base ** 2, template.shape).copy()
-    if local > 0:
-        half = max(1, int(round(LOCAL_FRACTION * template.shape[0])))
-        var += float(local) * local_variance(template, half)
-    return np.sqrt(var)
+        return np.ones_like(spread)
+    return config.sigma_fraction * np.maximum(spread, config.sigma_floor * rms)
 
 
-def recognition_sigma(template: np.ndarray, sigma: np.ndarray) -> np.ndarray:
-    """Sigma of the bank's recognition score for one template (see ``FollowerBank``).
+def default_sigma(template: np.ndarray, *, pooled: list[np.ndarray] | None = None,
+                  config: FollowerConfig = _DEFAULT) -> np.ndarray:
+    """(T, D) float [input units]: the default sigma of ``template (T, D)``, the same for
+    every state; ``pooled``: the templates whose spread sets it (a bank's, so that every
+    follower measures distance alike), default the template alone."""
+    base = pooled_sigma(pooled if pooled else [template], config)
+    return np.ascontiguousarray(np.broadcast_to(base, template.shape))
 
-    Recognising *which* action is performed must tolerate what following need not: another
-    performance of an action differs from the demonstration in intensity as well as timing. Per
-    state: the follower's sigma, but at least ``RECOGNITION_FRACTION`` of the template's own
-    channel spread (floored like the default sigma).
 
-    template : (T, D) float; sigma : (T, D) float. Returns (T, D) float [input units]."""
+def recognition_sigma(template: np.ndarray, sigma: np.ndarray, config) -> np.ndarray:
+    """(T, D) float: a bank's recognition sigma for one template: ``sigma`` ((D,) or (T, D)),
+    but at least ``config.recognition_floor`` times the template's own channel spread
+    (floored like the default sigma); ``config`` a ``BankConfig``."""
     spread = template.std(axis=0)
     rms = float(np.sqrt(np.mean(spread ** 2)))
+    sigma = np.broadcast_to(sigma, template.shape)
     if rms <= 0.0:
         return sigma.copy()
-    own = RECOGNITION_FRACTION * np.maximum(spread, SIGMA_FLOOR * rms)
+    own = config.recognition_floor * np.maximum(spread, config.follower.sigma_floor * rms)
     return np.maximum(sigma, own[None, :])
 
 
@@ -134,21 +109,19 @@ def noise_sigma(template: np.ndarray) -> np.ndarray:
     return mad / (0.6745 * math.sqrt(6.0))
 
 
-def exact_scale(template: np.ndarray, sigma: np.ndarray) -> np.ndarray:
-    """(D,) float: the scale of a bank's exact-repetition model for one template, relative to
-    the follower's default ``sigma (T, D)``: the template's own noise (``noise_sigma``) per
-    channel, clipped to [``EXACT_FLOOR``, 1] times the default. A performer's own take
-    replayed differs from the demonstration by about its sensor noise; a channel noisier than
-    the default sigma (repetitive activities) keeps the default, and a nearly noiseless one
-    (GunPoint's smoothed positions: 0.3 % of their spread) is floored at a quarter of it."""
-    base = np.median(sigma, axis=0)
-    ratio = noise_sigma(template) / base
-    return np.clip(ratio, EXACT_FLOOR, 1.0)
+def exact_scale(template: np.ndarray, sigma: np.ndarray, floor: float) -> np.ndarray:
+    """(D,) float: the scale of a bank's exact-repetition component for one template, relative
+    to the default ``sigma`` ((D,), per channel): the template's own noise per channel,
+    clipped to [``floor``, 1]. A take replayed by its performer differs from the
+    demonstration by about its sensor noise; a channel noisier than the default sigma keeps
+    the default, a nearly noiseless one is floored."""
+    return np.clip(noise_sigma(template) / sigma, floor, 1.0)
 
 
-def default_window(length: int) -> int:
+def default_window(length: int, config: FollowerConfig = _DEFAULT) -> int:
     """Window half-width p [states] for a template of ``length`` frames."""
-    return int(min(length, max(WINDOW_MIN, math.ceil(WINDOW_FRACTION * length))))
+    return int(min(length, max(config.window_min,
+                               math.ceil(config.window_fraction * length))))
 
 
 def as_sigma(sigma, shape: tuple[int, int]) -> np.ndarray:

@@ -184,7 +184,7 @@ def train_hmm(demonstrations, *, states: int | None = None, iterations: int = 10
 
 
 def train_follower(demonstrations, *, states: int | None = None, iterations: int = 10,
-                   window=None, transitions="speed", outlier_sigmas=None) -> Follower:
+                   window=None, transitions=None, config=None) -> Follower:
     """A :class:`~followers.Follower` from several demonstrations of one action.
 
     The template is the trained HMM's means (S, D) and sigma its per-state standard deviations,
@@ -194,4 +194,4 @@ def train_follower(demonstrations, *, states: int | None = None, iterations: int
     trained = train_hmm(demonstrations, states=states, iterations=iterations)
     sigma = np.maximum(trained.sigma, default_sigma(trained.means))
     return Follower(trained.means, sigma=sigma, window=window, transitions=transitions,
-                    outlier_sigmas=outlier_sigmas)
+                    config=config)

@@ -21,17 +21,15 @@ the last state (the current repetition is over) and ``restart_anywhere`` from an
   level weights proportional to their speed on the log grid) or with every level equally
   likely (``"log-uniform"``, flat in log speed, which favours the slow half of the range).
   A new repetition begins from the last state with probability 1e-3 per frame, and by
-  default not from anywhere else (``restart_anywhere=0``; it was 1e-3 from every state until
-  revision 10, and on repetitive real data, BasicMotions' walking and running or the Wiimote
-  gestures, a single fast multi-channel frame could then throw the follower back to the start
-  mid-gesture: p95 progress error 50-56 % at 0.5x). A repetition abandoned halfway is
+  default not from anywhere else (``restart_anywhere=0``: with 1e-3 from every state, on
+  repetitive real data a single fast multi-channel frame could throw the follower back to the
+  start mid-gesture: p95 progress error 50-56 % at 0.5x). A repetition abandoned halfway is
   picked up again once the follower has run out its template.
   ``resolution=R`` upsamples the template to R states per frame (R times the work): a speed
   between two whole advances per frame then moves the chain by a coin flip over 1/R of a frame
   instead of a whole one. ``transition_model`` defaults to 1 (a bank's per-frame budget); a
-  lone ``Follower`` given ``"speed"`` by name uses 4 (``followers.follower.FOLLOWER_RESOLUTION``:
-  the flips' spread had the progress interval too wide at 0.5x and 1.5x), with a speed jitter of
-  0.015 (``FOLLOWER_SPEED_JITTER``).
+  lone ``Follower`` uses 4 (``FollowerConfig.resolution``: the flips' spread had the progress
+  interval too wide at 0.5x and 1.5x), with a speed jitter of 0.015.
 - ``"skip"`` — one speed level with skip transitions of 0–3 states (a memoryless
   alternative, kept for comparison in the benchmark).
 """

@@ -6,8 +6,8 @@ import tracemalloc
 import numpy as np
 import pytest
 
-from followers import (BankOutput, Follower, FollowerBank, FollowerOutput, time_warp,
-                       transition_model)
+from followers import (BankConfig, BankOutput, Follower, FollowerBank, FollowerConfig,
+                       FollowerOutput, time_warp, transition_model)
 
 hmmc = pytest.importorskip("hmmlearn._hmmc")
 
@@ -142,7 +142,8 @@ def test_speed_transitions_match_dense_hmm(rng):
     X = X + rng.normal(scale=0.2, size=X.shape)
     X[5, 0] = np.nan
     sigma = 0.5
-    follower = Follower(template, sigma=sigma, window=T, transitions=model, subframe=False)
+    follower = Follower(template, sigma=sigma, window=T, transitions=model,
+                        config=FollowerConfig(subframe=False))
     trace = follower.follow(X)
 
     n = T * M
@@ -227,22 +228,21 @@ def test_tempo_variance_scales_the_forward_variance_by_the_followers_tempo(rng):
     (its own advance per frame, a 10-frame forgetful mean from 1, within 0.4-2.5) to the power
     0.2: checked against a plain loop over the trace of the same follower without it. Progress
     is unchanged, and a fast performer's interval is widened, a slow one's narrowed."""
-    from followers.follower import TEMPO_EXPONENT, TEMPO_MEMORY
-
+    config = FollowerConfig()
     template = random_template(rng, 60, 2)
     T = len(template)
     for speed, widened in ((2.0, True), (0.5, False)):
         X, _ = time_warp(template, speed)
         X = X + rng.normal(scale=0.05, size=X.shape)
-        plain = Follower(template, tempo_variance=False).follow(X)
+        plain = Follower(template, config=config.replace(tempo_variance=False)).follow(X)
         scaled = Follower(template).follow(X)
         np.testing.assert_array_equal(scaled.progress, plain.progress)
         last, tempo, factors = 0.0, 1.0, []
         for p in plain.progress:
             advance = max(p - last, 0.0) * (T - 1)
             last = p
-            tempo += (advance - tempo) / TEMPO_MEMORY
-            factors.append(min(max(tempo, 0.4), 2.5) ** TEMPO_EXPONENT)
+            tempo += (advance - tempo) / config.tempo_memory
+            factors.append(min(max(tempo, 0.4), 2.5) ** config.tempo_exponent)
         np.testing.assert_allclose(scaled.variance, plain.variance * np.array(factors),
                                    rtol=1e-12, atol=1e-300)
         middle = slice(len(X) // 3, 2 * len(X) // 3)
@@ -251,8 +251,8 @@ def test_tempo_variance_scales_the_forward_variance_by_the_followers_tempo(rng):
     # the paper's model and a given transition model report the forward variance itself
     assert Follower(template, transitions="mop")._tempo is None
     assert Follower(template, transitions=transition_model("speed"))._tempo is None
-    with pytest.raises(TypeError, match="tempo_variance"):
-        Follower(template, tempo_variance="yes")
+    with pytest.raises(TypeError, match="tempo_variance must be True or False"):
+        FollowerConfig(tempo_variance="yes")
 
 
 def test_all_nan_frame_only_predicts(rng):
@@ -356,7 +356,7 @@ def test_position_inside_a_cell_matches_quadrature(n):
     and mean square against a fine trapezoid sum, from a flat cell to a needle far outside it
     (the exponential tails and the near-linear case take other branches). The trapezoid sum
     itself is good to about 1e-6."""
-    from followers._kernels import _half_cell
+    from followers._cells import _half_cell
 
     h = 0.5
     # fine near both ends, where the steep cases keep their mass
@@ -397,11 +397,12 @@ def test_progress_between_template_frames(rng):
             assert on.progress[0] == 0.0
             assert np.all(on.progress[-10:] > 1.0 - 1e-4)
             assert np.all(on.progress[-5:] > 1.0 - 1e-6)
-        off = Follower(template, transitions=transition_model("speed"), subframe=False)
+        off = Follower(template, transitions=transition_model("speed"),
+                       config=FollowerConfig(subframe=False))
         error_off = np.abs(off.follow(performance).progress - truth)[inner] * 79
         assert np.median(error_off) > max(0.1, 3 * median[1]), speed
-    with pytest.raises(TypeError, match="subframe must be True, False or None"):
-        Follower(template, subframe="yes")
+    with pytest.raises(TypeError, match="subframe must be True or False"):
+        FollowerConfig(subframe="yes")
 
 
 # ---- validation ---------------------------------------------------------------------------------
@@ -432,7 +433,7 @@ def test_held_pose_advances_at_the_speed_priors_mean(prior):
         {"uniform": 1.546, "log-uniform": 1.176}[prior], abs=1e-3)
     T = 400
     follower = Follower(np.zeros((T, 1)), sigma=1.0, window=T, transitions=model,
-                        subframe=False)
+                        config=FollowerConfig(subframe=False))
     assert follower.step(np.zeros(1)).progress == 0.0  # the first frame is the first state
     levels = model.initial_speed.copy()
     travelled = 0.0
@@ -453,11 +454,35 @@ def test_held_pose_advances_at_the_speed_priors_mean(prior):
     ({"sigma": np.ones(5)}, r"one value per channel \(3,\)"),
     ({"window": 0}, "window must be >= 1"),
     ({"transitions": "fast"}, "transitions must be one of"),
-    ({"outlier_sigmas": 0.0}, "outlier_sigmas must be > 0"),
 ])
 def test_bad_parameters_raise_clear_errors(rng, kwargs, match):
     with pytest.raises(ValueError, match=match):
         Follower(random_template(rng, 20, 3), **kwargs)
+
+
+@pytest.mark.parametrize("make, match", [
+    (lambda: FollowerConfig(outlier_sigmas=0.0), r"outlier_sigmas must be > 0.0 \[sigmas\]"),
+    (lambda: FollowerConfig(window_min=0), "window_min must be >= 1"),
+    (lambda: FollowerConfig(speed_min=3.0), "speed_min < speed_max"),
+    (lambda: FollowerConfig(restart=1.0), r"restart must be < 1.0"),
+    (lambda: FollowerConfig(prune_mass=float("nan")), "prune_mass must be a number"),
+    (lambda: FollowerConfig(speed_jitter=float("inf")), "speed_jitter must be a finite number"),
+    (lambda: FollowerConfig(transitions="mop"), "resolution applies to 'speed'"),
+    (lambda: BankConfig(reject_margin=float("inf")), "reject_margin must be < inf"),
+    (lambda: BankConfig(lead_cap=0.0), "lead_cap must be > 0.0"),
+    (lambda: BankConfig(mixture_lowest=0.9, mixture_highest=0.5), "mixture_lowest <="),
+])
+def test_configs_validate_every_field(make, match):
+    with pytest.raises(ValueError, match=match):
+        make()
+    with pytest.raises(TypeError, match="window_min must be an int"):
+        FollowerConfig(window_min=2.5)
+    with pytest.raises(TypeError, match="config must be a BankConfig"):
+        FollowerBank({"a": np.zeros((5, 1))}, config=FollowerConfig())
+    # every field documented, with its unit
+    for cls in (FollowerConfig, BankConfig):
+        for name, _, unit, doc in cls.describe():
+            assert unit and len(doc) > 10, name
 
 
 def test_bad_templates_raise_clear_errors():
@@ -547,16 +572,17 @@ def test_bank_reports_the_shown_actions_position_between_template_frames(rng, ac
     performance = performance + rng.normal(scale=0.02, size=performance.shape)
     errors = {}
     for subframe in (True, False):
-        bank = FollowerBank(actions, subframe=subframe)
+        config = BankConfig(follower=FollowerConfig.bank_preset().replace(subframe=subframe))
+        bank = FollowerBank(actions, config=config)
         result = bank.follow(performance)
         shown = result["action"] == 1
         assert shown[10:].all()
         errors[subframe] = np.median(np.abs(result["progress"] - truth)[shown]) * 89
-        assert not bank._engine.subframe[[0, 2]].any()
-        assert bank._engine.subframe[1] == subframe
+        assert not bank._state.subframe[[0, 2]].any()
+        assert bank._state.subframe[1] == subframe
     assert errors[True] < 0.8 * errors[False]
-    with pytest.raises(TypeError, match="subframe must be True, False or None"):
-        FollowerBank(actions, subframe=1)
+    with pytest.raises(TypeError, match="subframe must be True or False"):
+        FollowerConfig(subframe=1)
 
 
 def test_bank_step_does_not_grow_memory(actions, rng):
@@ -584,7 +610,7 @@ def test_bank_rejects_what_no_template_explains(rng, actions):
     waits in place.
     A known action is accepted throughout."""
     bank = FollowerBank(actions)
-    paced = FollowerBank(actions, pace_weight=2.0)
+    paced = FollowerBank(actions, config=BankConfig(pace_weight=2.0))
     strangers = [random_template(rng, 150, 4, scale=1.5) for _ in range(8)]
     rejected = np.mean([bank.follow(s)["action"][20:] == -1 for s in strangers])
     rejected_paced = np.mean([paced.follow(s)["action"][20:] == -1 for s in strangers])
@@ -623,37 +649,34 @@ def test_learned_sigma_scale_matches_the_performers_noise(rng, noise):
     fixed = Follower(template, sigma=sigma)  # a given sigma is used as given
     fixed.follow(X)
     assert fixed.sigma_scale == 1.0
-    chosen = Follower(template, sigma=sigma, adapt_sigma=True)  # unless asked to adapt it
-    chosen.follow(X)
-    assert chosen.sigma_scale == pytest.approx(follower.sigma_scale, rel=1e-9)
+    off = Follower(template, config=FollowerConfig(adapt_sigma=False))
+    off.follow(X)
+    assert off.sigma_scale == 1.0
     with pytest.raises(TypeError, match="adapt_sigma"):
-        Follower(template, adapt_sigma="yes")
+        FollowerConfig(adapt_sigma="yes")
 
 
 def test_bank_evidence_stays_bounded_without_forgetting(rng, actions):
     """The default posterior forgets nothing (memory = inf); its evidence is kept relative to
     the leader, so it stays within the lead cap however long the performance."""
-    from followers.bank import LEAD_CAP
-
     bank = FollowerBank(actions)
-    assert bank.memory == float("inf")
+    assert bank.config.memory == float("inf")
     X = rng.normal(scale=3.0, size=(3000, 4))
     for x in X:
         bank.step(x)
     recent = bank.recent_log_likelihoods
     assert recent.max() == 0.0
-    assert recent.min() >= -LEAD_CAP - 1e-9
+    assert recent.min() >= -bank.config.lead_cap - 1e-9
     assert bank.posteriors.sum() == pytest.approx(1.0)
 
 
 def test_bank_lead_cap_is_lower_once_the_leaders_action_is_performed(rng, actions):
-    """In the middle of the leading action the others trail by up to LEAD_CAP nats (its
+    """In the middle of the leading action the others trail by up to ``lead_cap`` nats (its
     middle decides another performer's take); once it is performed to its end, by up to
-    LEAD_CAP_AT_END (the next action may begin)."""
-    from followers.bank import LEAD_CAP, LEAD_CAP_AT_END
-
-    assert LEAD_CAP > LEAD_CAP_AT_END
+    ``lead_cap_at_end`` (the next action may begin)."""
     bank = FollowerBank(actions)
+    lead_cap, lead_cap_at_end = bank.config.lead_cap, bank.config.lead_cap_at_end
+    assert lead_cap > lead_cap_at_end
     wave = actions["wave"] + rng.normal(scale=0.05, size=actions["wave"].shape)
     trail = []
     for x in wave:
@@ -663,8 +686,8 @@ def test_bank_lead_cap_is_lower_once_the_leaders_action_is_performed(rng, action
         out = bank.step(wave[-1])
     middle = trail[len(wave) // 3: 2 * len(wave) // 3]
     assert out.action == "wave" and out.progress > 0.95
-    assert min(middle) == pytest.approx(-LEAD_CAP, abs=1e-9)
-    assert bank.recent_log_likelihoods.min() == pytest.approx(-LEAD_CAP_AT_END, abs=1e-9)
+    assert min(middle) == pytest.approx(-lead_cap, abs=1e-9)
+    assert bank.recent_log_likelihoods.min() == pytest.approx(-lead_cap_at_end, abs=1e-9)
 
 
 def test_bank_switch_margin_is_validated_and_used(rng, actions):
@@ -673,12 +696,13 @@ def test_bank_switch_margin_is_validated_and_used(rng, actions):
     active action can also be left) the first choice is never left."""
     for bad in (-1.0, float("nan"), float("inf")):
         with pytest.raises(ValueError, match="switch_margin"):
-            FollowerBank(actions, switch_margin=bad)
+            BankConfig(switch_margin=bad)
     wave, _ = time_warp(actions["wave"], 1.0)
     clap, _ = time_warp(actions["clap"], 1.0)
     X = np.vstack([wave, clap])
     said = FollowerBank(actions).follow(X)["action"]
-    stuck = FollowerBank(actions, switch_margin=1e6, reject_margin=-np.inf).follow(X)["action"]
+    stuck = FollowerBank(actions, reject_margin=-np.inf,
+                         config=BankConfig(switch_margin=1e6)).follow(X)["action"]
     assert said[-1] == list(actions).index("clap")
     assert stuck[-1] == stuck[len(wave) - 1] == list(actions).index("wave")
 
@@ -693,13 +717,13 @@ def test_bank_pace_term_rejects_a_pose_held_from_the_middle_of_an_action(rng, ac
     hold = np.repeat(nod[30:31], 150, axis=0) + rng.normal(scale=0.05, size=(150, 4))
     performance, _ = time_warp(actions["nod"], 0.6)
     plain = FollowerBank(actions)
-    paced = FollowerBank(actions, pace_weight=2.0)
+    paced = FollowerBank(actions, config=BankConfig(pace_weight=2.0))
     assert np.mean(plain.follow(hold)["action"][20:] == -1) < 0.1
     assert np.mean(paced.follow(hold)["action"][20:] == -1) > 0.6
     assert np.mean(paced.follow(performance)["action"][10:] == 1) > 0.95
     for bad in (-1.0, float("nan"), float("inf")):
-        with pytest.raises(ValueError, match="pace_weight must be a finite number >= 0"):
-            FollowerBank(actions, pace_weight=bad)
+        with pytest.raises(ValueError, match="pace_weight must be"):
+            BankConfig(pace_weight=bad)
 
 
 def test_bank_outline_model_matches_hmmlearn_and_feeds_the_evidence(rng, actions):
@@ -711,11 +735,11 @@ def test_bank_outline_model_matches_hmmlearn_and_feeds_the_evidence(rng, actions
     the followers do.)"""
     from hmmlearn import hmm
 
-    from followers.bank import OUTLINE_FLOOR, OUTLINE_OWN_VARIANCE, OUTLINE_RESTART
-
+    uncapped = BankConfig(follower=FollowerConfig.bank_preset().replace(outlier_sigmas=1e6))
+    c = uncapped
     templates = {"nod": actions["nod"], "slower nod": time_warp(actions["nod"], 0.7)[0],
                  "shifted nod": actions["nod"] + 0.5}
-    bank = FollowerBank(templates, outlier_sigmas=1e6)
+    bank = FollowerBank(templates, config=uncapped)
     X = time_warp(actions["nod"], 1.3)[0]
     X = X + rng.normal(scale=0.3, size=X.shape)
     trace = bank.follow(X)
@@ -729,10 +753,10 @@ def test_bank_outline_model_matches_hmmlearn_and_feeds_the_evidence(rng, actions
         chain = 0.5 * (np.eye(10) + np.eye(10, k=1))
         chain[-1, -1] = 1.0
         # and from anywhere, with a small probability, back to the first state
-        model.transmat_ = (1.0 - OUTLINE_RESTART) * chain + OUTLINE_RESTART * np.eye(10)[[0]]
+        model.transmat_ = (1.0 - c.outline_restart) * chain + c.outline_restart * np.eye(10)[[0]]
         model.means_ = np.stack([template[r].mean(axis=0) for r in stretches])
         model.covars_ = np.stack([template[r].var(axis=0) for r in stretches]) + (
-            OUTLINE_OWN_VARIANCE * template.var(axis=0) + OUTLINE_FLOOR * spread ** 2)
+            c.outline_own_variance * template.var(axis=0) + c.outline_floor * spread ** 2)
         assert bank.outline_log_likelihoods[k] == pytest.approx(model.score(X), rel=1e-9)
     # the weight: 0 leaves the fit alone and changes the evidence (with the recognition
     # mixture's weight fixed: a learned one follows the posterior, and with it the fit)
@@ -740,14 +764,13 @@ def test_bank_outline_model_matches_hmmlearn_and_feeds_the_evidence(rng, actions
     # active_restart: here the same rate as the others', or the fit would follow the posterior
     # too; to 1e-9: the fits still differed by up to 1e-10 relative on some seeds, e.g.
     # MOP_TEST_SEED=10)
-    fixed = FollowerBank(templates, outlier_sigmas=1e6, mixture_memory=None,
-                         active_restart=1e-3).follow(X)
-    plain = FollowerBank(templates, outlier_sigmas=1e6, outline_weight=0.0,
-                         mixture_memory=None, active_restart=1e-3).follow(X)
+    still = uncapped.replace(learn_mixture=False, active_restart=1e-3)
+    fixed = FollowerBank(templates, config=still).follow(X)
+    plain = FollowerBank(templates, config=still.replace(outline_weight=0.0)).follow(X)
     np.testing.assert_allclose(plain["fits"], fixed["fits"], rtol=1e-9)
     assert np.abs(plain["posteriors"] - trace["posteriors"]).max() > 1e-3
-    with pytest.raises(ValueError, match="outline_weight must be a finite number >= 0"):
-        FollowerBank(templates, outline_weight=-1.0)
+    with pytest.raises(ValueError, match="outline_weight must be >= 0"):
+        BankConfig(outline_weight=-1.0)
 
 
 def test_bank_recognition_mixture_is_the_two_models_mixed_per_state(rng, actions):
@@ -756,8 +779,8 @@ def test_bank_recognition_mixture_is_the_two_models_mixed_per_state(rng, actions
     follower's sigma times a scale: checked against two engines that each score with one of
     the models alone (NaN channels included), while the forward recursion, and so progress, is
     untouched. Against the bank's default, 0 leaves the progress as it was."""
-    from followers._engine import ForwardEngine
-    from followers.transitions import transition_model
+    from followers._kernels import forward_step
+    from followers.model import build_forward, forward_state
 
     templates = list(actions.values())
     follow = [np.full(t.shape, 1.0) + 0.2 * rng.random(t.shape) for t in templates]
@@ -766,8 +789,12 @@ def test_bank_recognition_mixture_is_the_two_models_mixed_per_state(rng, actions
     model = transition_model()
 
     def engine(recognition, mixture=None):
-        return ForwardEngine(templates, follow, windows, model, cap=25.0, prune=1e-9,
-                             recognition_sigmas=recognition, recognition_mixture=mixture)
+        forward = build_forward(templates, follow, windows, model, cap=25.0, prune=1e-9,
+                                tilt=10.0, recognition=recognition,
+                                exact=None if mixture is None else mixture[1])
+        state = forward_state(forward)
+        state.mixture[0] = 0.0 if mixture is None else mixture[0]
+        return forward.model, state
 
     # the narrow component: the follower's sigma times a scale per template and channel
     scales = rng.uniform(0.25, 1.0, size=(len(templates), 4))
@@ -777,32 +804,33 @@ def test_bank_recognition_mixture_is_the_two_models_mixed_per_state(rng, actions
     X[5:9, 1] = np.nan
     X[12] = np.nan
     for x in X:
-        n_obs = mixed.step(x)
+        n_obs = forward_step(*mixed, x)
         for e in alone:
-            e.step(x)
-        np.testing.assert_array_equal(mixed.frame_loglik[0], alone[0].frame_loglik[0])
-        np.testing.assert_array_equal(mixed.moments, alone[0].moments)
+            forward_step(*e, x)
+        mixed_state, tolerant_state, exact_state = mixed[1], alone[0][1], alone[1][1]
+        np.testing.assert_array_equal(mixed_state.frame_loglik[0], tolerant_state.frame_loglik[0])
+        np.testing.assert_array_equal(mixed_state.moments, tolerant_state.moments)
         if n_obs:
-            expect = np.logaddexp(math.log(0.3) + alone[1].frame_loglik[1],
-                                  math.log(0.7) + alone[0].frame_loglik[1])
-            np.testing.assert_allclose(mixed.frame_loglik[1], expect, rtol=1e-12)
+            expect = np.logaddexp(math.log(0.3) + exact_state.frame_loglik[1],
+                                  math.log(0.7) + tolerant_state.frame_loglik[1])
+            np.testing.assert_allclose(mixed_state.frame_loglik[1], expect, rtol=1e-12)
             # row 2: the narrow component's share of that score, which a bank learns from
             np.testing.assert_allclose(
-                mixed.frame_loglik[2], math.log(0.3) + alone[1].frame_loglik[1] - expect,
-                rtol=1e-9, atol=1e-12)
+                mixed_state.frame_loglik[2],
+                math.log(0.3) + exact_state.frame_loglik[1] - expect, rtol=1e-9, atol=1e-12)
     # the bank: on by default (starting at 0.8), its narrow component the follower's own
-    # default sigma (1 / BANK_SIGMA_SCALE of the bank's following sigma)
+    # default sigma (1 / following_scale of the bank's following sigma)
     on = FollowerBank(actions)
-    off = FollowerBank(actions, recognition_mixture=0.0)
+    off = FollowerBank(actions, config=BankConfig(mixture_start=0.0))
     assert on.recognition_mixture == 0.8 and off.recognition_mixture == 0.0
     a, b = on.follow(X), off.follow(X)
     np.testing.assert_array_equal(a["progresses"], b["progresses"])
     assert np.abs(a["fits"] - b["fits"]).max() > 1e-3
     for bad in (1.0, -0.1, float("nan")):
-        with pytest.raises(ValueError, match=r"recognition_mixture must be in \[0, 1\)"):
-            FollowerBank(actions, recognition_mixture=bad)
+        with pytest.raises(ValueError, match="mixture_start must be"):
+            BankConfig(mixture_start=bad)
     for bad in (np.zeros((3, 4)), np.ones((2, 4))):
-        with pytest.raises(ValueError, match="a recognition mixture"):
+        with pytest.raises(ValueError, match="exact-repetition scale"):
             engine(tolerant, (0.3, bad))
 
 
@@ -812,8 +840,8 @@ def test_bank_learns_the_mixture_weight_from_the_performance(rng, actions):
     (checked against a plain loop over the frames). It rises to the top of its range on a
     replay of a demonstration, falls to the bottom on a take that differs from it by several
     times the template's own noise, ignores frames with no observed channel, starts afresh at
-    each reset, and stays put with ``mixture_memory=None``."""
-    from followers.bank import MIXTURE_MEMORY, MIXTURE_PRIOR, MIXTURE_RANGE, RECOGNITION_MIXTURE
+    each reset, and stays put with ``learn_mixture=False``."""
+    c = BankConfig()
 
     nod = actions["nod"]
     replay = time_warp(nod, 1.2)[0]
@@ -824,10 +852,10 @@ def test_bank_learns_the_mixture_weight_from_the_performance(rng, actions):
     other += rng.normal(scale=2.5, size=other.shape)
     other[10:14] = np.nan
     bank = FollowerBank(actions)
-    decay = math.exp(-1.0 / MIXTURE_MEMORY)
+    decay = math.exp(-1.0 / c.mixture_memory)
     for X in (replay, other):
         bank.reset()
-        weight, count = RECOGNITION_MIXTURE, MIXTURE_PRIOR
+        weight, count = c.mixture_start, c.mixture_prior
         weights = []
         for x in X:
             assert bank.recognition_mixture == pytest.approx(weight, rel=1e-12)
@@ -835,20 +863,20 @@ def test_bank_learns_the_mixture_weight_from_the_performance(rng, actions):
             assert bank.step(x).index >= 0 or len(weights) < 10
             if np.isnan(x).all():
                 continue
-            share = float(bank.posteriors @ np.exp(bank._engine.frame_loglik[2]))
+            share = float(bank.posteriors @ np.exp(bank._state.frame_loglik[2]))
             count = decay * count + 1.0
-            weight = min(max(weight + (share - weight) / count, MIXTURE_RANGE[0]),
-                         MIXTURE_RANGE[1])
+            weight = min(max(weight + (share - weight) / count, c.mixture_lowest),
+                         c.mixture_highest)
         assert bank.recognition_mixture == pytest.approx(weight, rel=1e-12)
         # measured over seeds 0-39: at 0.95 throughout on the replay, at most 0.23 on the other
         assert np.mean(weights[20:]) > (0.9 if X is replay else 0.0)
         assert np.mean(weights[20:]) < (1.0 if X is replay else 0.3)
-    fixed = FollowerBank(actions, mixture_memory=None)
+    fixed = FollowerBank(actions, config=c.replace(learn_mixture=False))
     fixed.follow(replay)
-    assert fixed.recognition_mixture == RECOGNITION_MIXTURE
+    assert fixed.recognition_mixture == c.mixture_start
     for bad in (0.0, -1.0, float("nan")):
-        with pytest.raises(ValueError, match="mixture_memory must be > 0 frames"):
-            FollowerBank(actions, mixture_memory=bad)
+        with pytest.raises(ValueError, match="mixture_memory must be"):
+            BankConfig(mixture_memory=bad)
 
 
 def test_bank_exact_model_is_as_narrow_as_each_templates_own_noise(rng):
@@ -887,7 +915,7 @@ def test_bank_mixture_tells_apart_replays_that_differ_by_less_than_the_tolerance
     templates = {"low": low, "high": high}
     evidence = {}
     for w in (0.0, 0.5):
-        bank = FollowerBank(templates, recognition_mixture=w)
+        bank = FollowerBank(templates, config=BankConfig(mixture_start=w))
         odds = []
         for k, truth in enumerate(bank.actions):
             X = templates[truth] + rng.normal(scale=0.02 * low.std(), size=low.shape)

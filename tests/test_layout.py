@@ -33,9 +33,10 @@ LAYERS = {
         ["capture.spec", "capture.devices"],
     ],
     "followers": [
-        ["followers._kernels", "followers._bank_kernels", "followers.defaults",
-         "followers.preprocessing", "followers.transitions", "followers.datasets"],
-        ["followers._engine"],
+        ["followers._jit", "followers._cells", "followers._kernels", "followers._bank_kernels",
+         "followers.config", "followers.defaults", "followers.preprocessing",
+         "followers.transitions", "followers.datasets", "followers.model"],
+        ["followers.bank_model"],
         ["followers.follower"],
         ["followers.bank", "followers.training"],
         ["followers.confusion"],

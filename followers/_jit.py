@@ -1,0 +1,18 @@
+"""The numba settings of every per-frame kernel.
+
+- ``fastmath={"reassoc", "contract"}``: the compiler may reassociate sums and fuse
+  multiply-adds (vectorised emission loops), but not assume away NaN or inf: -inf marks "no
+  state yet" and an overflow check compares against inf.
+- ``_nrt=False``: no reference counting. The kernels allocate nothing per frame (every array
+  is made by the model or the state, in Python); without it, each read of an array from a
+  model or state named tuple would cost a pair of atomic reference-count updates, which in
+  the per-row loops cost more than the arithmetic.
+- ``cache=True``: compiled once per installation; a fresh process loads them from the cache.
+- ``inline``: stages inlined into the kernel that calls them (numba's own inliner), so that a
+  stage is a function of a few structured arguments at no cost per call.
+"""
+import numba as nb
+
+FAST = {"reassoc", "contract"}
+kernel = nb.njit(cache=True, fastmath=FAST, _nrt=False)
+inline = nb.njit(cache=True, fastmath=FAST, _nrt=False, inline="always")

@@ -1,0 +1,186 @@
+"""What a bank adds to its followers' forward model: built once (``BankModel``) and changed
+every frame (``BankState``), read and written by ``_bank_kernels``.
+
+- The followers' sigmas: with the defaults, two multiples of a lone follower's default sigma
+  (``default_sigma``, its base level from all templates together so that every follower
+  measures distance alike): ``following_scale`` for the forward recursion, and
+  ``recognition_scale`` (floored at ``recognition_floor`` of each template's own channel
+  spread) for the recognition score, with an exact-repetition component as narrow as each
+  template's own noise.
+- The background model: one Gaussian over every frame of every template ("some pose of this
+  performer"), against which the rejection's fit is measured.
+- The outline models: per action a coarse left-to-right HMM of ``outline_states`` states over
+  equal stretches of its template, each a diagonal Gaussian with the stretch's mean and
+  variance.
+"""
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+
+from followers.config import BankConfig
+from followers.defaults import exact_scale, pooled_sigma, recognition_sigma
+
+
+class BankModel(NamedTuple):
+    """A bank's tables and constants, read-only to the kernels (see ``BankConfig`` for the
+    meaning of the constants)."""
+
+    outline_mean: np.ndarray         # (K, S, D): each outline state's mean [input units]
+    outline_inv_var: np.ndarray      # (K, S, D): 1 / its variance
+    outline_log_norm: np.ndarray     # (K, S, D): -0.5 log(2 pi variance)
+    background_mean: np.ndarray      # (D,): the background Gaussian
+    background_weight: np.ndarray    # (D,): 1 / its variance
+    background_log_norm: np.ndarray  # (D,)
+    thresholds: np.ndarray           # (K,): an action is accepted while fit >= threshold
+    outline_weight: float
+    outline_fit_margin: float        # [nats per channel], finite
+    outline_restart: float
+    decay: float                     # forgetting factor of the evidence per frame
+    fit_decay: float                 # forgetting factor of the fit per frame
+    evidence_cap: float
+    lead_cap: float
+    lead_cap_at_end: float
+    end_fraction: float
+    fit_floor: float
+    enter_margin: float
+    leave_margin: float
+    switch_margin: float
+    pace_weight: float
+    pace_decay: float
+    pace_reference: float            # [states per frame]
+    pace_floor: float                # [states per frame]
+    learn_mixture: bool              # learn the exact component's weight (a mixture exists)
+    mixture_start: float             # its weight at each reset (0: no mixture)
+    mixture_prior: float             # [frames]
+    mixture_decay: float
+    mixture_lowest: float
+    mixture_highest: float
+    idle_restart: float
+    active_restart: float
+    subframe: bool                   # the shown action's follower reports inside its cells
+
+
+class BankState(NamedTuple):
+    """What a bank changes every frame, besides its followers' state."""
+
+    outline_alpha: np.ndarray    # (K, S): each outline model's normalised forward variables
+    outline_scratch: np.ndarray  # (S,)
+    outline_ll: np.ndarray       # (K,): this frame's outline log-likelihood
+    outline_total: np.ndarray    # (K,): its sum since reset
+    outline_fresh: np.ndarray    # (1,) bool: no frame yet
+    recent: np.ndarray           # (K,) <= 0: the posterior's evidence, the leader at 0
+    fit: np.ndarray              # (K,): the rejection's fit [nats per channel per frame]
+    likelihood_fit: np.ndarray   # (K,): the fit before the pace term
+    fit_weight: np.ndarray       # (1,): the fit's forgetful count
+    pace: np.ndarray             # (K,): forgetful mean advance [states per frame]
+    last_position: np.ndarray    # (K,): main-track position last frame [states]
+    since_end: np.ndarray        # (K,): frames since progress last reached end_fraction
+    last_main: np.ndarray        # (K,) int64: main track last frame
+    posterior: np.ndarray        # (K,): over actions
+    progress: np.ndarray         # (K,): each follower's main-track progress [0, 1]
+    variance: np.ndarray         # (K,): its variance [progress units squared]
+    decision: np.ndarray         # (4,) int64: see ``_bank_kernels``
+    mixture_state: np.ndarray    # (2,): [weight, forgetful count]
+    gated: np.ndarray            # (1,) int64: the action the followers were last gated for
+
+
+def bank_sigmas(arrays: list[np.ndarray], config: BankConfig):
+    """(following, recognition, exact) sigmas of the default emission models: K (T_k, D)
+    sigmas for the recursion, K for the recognition score, and the exact-repetition
+    component's (K, D) scale relative to the following sigma (None: no mixture)."""
+    base = pooled_sigma(arrays, config.follower)
+    sigmas = [np.broadcast_to(config.following_scale * base, a.shape) for a in arrays]
+    recognition = [recognition_sigma(a, config.recognition_scale * base, config)
+                   for a in arrays]
+    exact = None
+    if config.mixture_start > 0.0:
+        exact = np.stack([exact_scale(a, base, config.exact_floor) for a in arrays])
+        exact /= config.following_scale
+    return sigmas, recognition, exact
+
+
+def outline_model(template: np.ndarray, states: int, spread: np.ndarray, config: BankConfig):
+    """The outline model of one template: ``(mean, variance)``, each (states, D) float, from
+    ``states`` equal stretches of ``template (T, D)`` (T >= states); ``spread (D,)``: the
+    bank's pooled channel spread, for the variance floor."""
+    stretches = np.array_split(np.arange(template.shape[0]), states)
+    mean = np.stack([template[r].mean(axis=0) for r in stretches])
+    floor = (config.outline_own_variance * template.var(axis=0)
+             + config.outline_floor * spread ** 2)
+    variance = np.stack([template[r].var(axis=0) for r in stretches]) + floor
+    return mean, variance
+
+
+def build_bank_model(arrays: list[np.ndarray], config: BankConfig, *, resolution: int,
+                     restart: tuple[float, float], subframe: bool,
+                     mixture: float) -> BankModel:
+    """The bank's model for templates ``arrays`` (K (T_k, D), validated); ``resolution``: the
+    followers' states per template frame; ``restart``: their chain's (from anywhere, from the
+    last state) per frame; ``subframe``: the shown follower reports inside its cells;
+    ``mixture``: the exact component's starting weight (0: no mixture)."""
+    c = config
+    K = len(arrays)
+    stacked = np.concatenate(arrays, axis=0)
+    spread = np.maximum(stacked.std(axis=0), 1e-6 * max(1.0, float(np.abs(stacked).max())))
+    S = min(c.outline_states, min(a.shape[0] for a in arrays))
+    outlines = [outline_model(a, S, spread, c) for a in arrays]
+    variance = np.stack([v for _, v in outlines])
+    rejecting = math.isfinite(c.reject_margin)
+    hysteresis = c.reject_hysteresis if rejecting else 0.0
+    idle = max(restart)
+    pace_reference = c.pace_reference * resolution
+    return BankModel(
+        outline_mean=np.stack([m for m, _ in outlines]), outline_inv_var=1.0 / variance,
+        outline_log_norm=-0.5 * np.log(2.0 * np.pi * variance),
+        background_mean=stacked.mean(axis=0), background_weight=1.0 / spread ** 2,
+        background_log_norm=-0.5 * np.log(2.0 * np.pi * spread ** 2),
+        thresholds=np.full(K, c.reject_margin if rejecting else -1e300),
+        outline_weight=c.outline_weight,
+        # a finite stand-in for inf (the kernel subtracts it times the channel count)
+        outline_fit_margin=min(c.outline_fit_margin, 1e300), outline_restart=c.outline_restart,
+        decay=math.exp(-1.0 / c.memory), fit_decay=math.exp(-1.0 / c.fit_memory),
+        evidence_cap=c.evidence_cap, lead_cap=c.lead_cap, lead_cap_at_end=c.lead_cap_at_end,
+        end_fraction=c.end_fraction, fit_floor=c.fit_floor, enter_margin=hysteresis,
+        leave_margin=hysteresis, switch_margin=c.switch_margin, pace_weight=c.pace_weight,
+        pace_decay=math.exp(-1.0 / c.pace_memory), pace_reference=pace_reference,
+        pace_floor=c.pace_floor * pace_reference,
+        learn_mixture=mixture > 0.0 and c.learn_mixture, mixture_start=mixture,
+        mixture_prior=c.mixture_prior, mixture_decay=math.exp(-1.0 / c.mixture_memory),
+        mixture_lowest=min(c.mixture_lowest, mixture),
+        mixture_highest=max(c.mixture_highest, mixture), idle_restart=idle,
+        active_restart=min(idle, c.active_restart), subframe=subframe)
+
+
+def bank_state(model: BankModel) -> BankState:
+    """A bank state for ``model`` (reset it before use)."""
+    K, S = model.outline_mean.shape[:2]
+    return BankState(
+        outline_alpha=np.zeros((K, S)), outline_scratch=np.zeros(S), outline_ll=np.zeros(K),
+        outline_total=np.zeros(K), outline_fresh=np.ones(1, dtype=np.bool_),
+        recent=np.zeros(K), fit=np.zeros(K), likelihood_fit=np.zeros(K), fit_weight=np.zeros(1),
+        pace=np.zeros(K), last_position=np.zeros(K), since_end=np.zeros(K),
+        last_main=np.zeros(K, dtype=np.int64), posterior=np.zeros(K), progress=np.zeros(K),
+        variance=np.zeros(K), decision=np.zeros(4, dtype=np.int64), mixture_state=np.zeros(2),
+        gated=np.zeros(1, dtype=np.int64))
+
+
+def reset_bank(model: BankModel, state: BankState) -> None:
+    """Forget every frame (the followers' state is reset by its owner)."""
+    K = state.recent.shape[0]
+    state.outline_alpha[:] = 0.0
+    state.outline_alpha[:, 0] = 1.0
+    state.outline_ll[:] = 0.0
+    state.outline_total[:] = 0.0
+    state.outline_fresh[:] = True
+    for name in ("recent", "fit", "likelihood_fit", "fit_weight", "last_position", "progress",
+                 "variance"):
+        getattr(state, name)[:] = 0.0
+    state.pace[:] = model.pace_reference
+    state.since_end[:] = np.inf
+    state.last_main[:] = 0
+    state.posterior[:] = 1.0 / K
+    state.decision[:] = (-1, 0, 0, 0)
+    state.mixture_state[:] = (model.mixture_start, model.mixture_prior)

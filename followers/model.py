@@ -1,0 +1,268 @@
+"""What the forward kernels read (a model, built once) and write (a state, every frame).
+
+K followers share one ``ForwardModel``: their templates stacked one above the other
+(``S = sum(T_k)`` states in all, template ``k`` rows ``offsets[k] : offsets[k] + lengths[k]``),
+their emission tables and the transition model's tables. A ``ForwardState`` holds everything
+that changes per frame, preallocated; a kernel never allocates. Both are named tuples of
+arrays, so that numba compiles (and caches) a kernel that takes them as a few arguments, and a
+new table or state array is one new field here, read by name where it is used.
+
+The layout of the state (see ``_kernels`` for the algorithm):
+
+- ``alpha (2, S, M)``: the normalised forward variables of two *tracks* per template over
+  (state, speed level). The *main* track is the current repetition, the *entry* track the
+  hypothesis that a new one began recently (fed by the restart probabilities). Their masses
+  sum to 1 after each frame; rows outside a track's support are zero.
+- ``rowsum (2, S)``: per-state mass of each track; ``support (K, 2, 2)``: first and last state
+  of each track's support (empty: last < first); ``moments (K, 2, 3)``: mass, mean state and
+  state variance of each track; ``main (K,)``: which track is the main one; ``fresh (K,)``:
+  no frame yet.
+- ``loglik (K,)``: log-likelihood of everything since reset; ``frame_loglik (3, K)``: of the
+  last frame under the follower's emission model (row 0) and the recognition model (row 1; a
+  copy of row 0 unless ``model.dual``). With ``mixture[0] = w > 0`` the recognition model is
+  a mixture per state: ``w`` on model 2 (an exact repetition: model 0's sigma times the
+  template's ``exact`` scale per channel) and ``1 - w`` on model 1; row 2 is then the log of
+  model 2's share of the frame's score.
+- ``scale2 (2, K)``, ``scale_weight (2, K)``: each template's learned emission scale squared
+  (row 0: the recursion's, row 1: the report's inside a cell) and the forgetful counts behind
+  them (``model.adapt``: forgetting factor, lowest and highest scale squared; factor 0: fixed).
+- Set by the owner between frames: ``restart (K, 2)`` [probability per frame of a new
+  repetition from anywhere, from the last state], ``subframe (K,)`` (report the position
+  inside a state's cell), ``mixture (1,)`` (the weight above).
+- Scratch: ``xs, observed (D,)`` (the cleaned frame), ``mix (M,)``, ``residual (S,)`` (each
+  state's capped sum of squared z-scores), ``sub (4, S)`` (see ``_kernels._subframe_rows``).
+"""
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+
+from followers.transitions import TransitionModel
+
+# a clamped input value stays this many (template range + sigma) away from the templates' range:
+# far away, yet every squared distance stays finite in float64 (a numerical guard, not a knob)
+CLAMP_SPAN = 1e3
+
+
+class ForwardModel(NamedTuple):
+    """The tables of K followers, read-only to the kernels."""
+
+    templates: np.ndarray      # (S, D) float [input units]
+    offsets: np.ndarray        # (K,) int64: first row of each template
+    lengths: np.ndarray        # (K,) int64: states of each template
+    half_windows: np.ndarray   # (K,) int64: window half-width [states]
+    weights: np.ndarray        # (E, S, D): 1 / sigma**2 per emission model (E = 2 when dual)
+    log_norm: np.ndarray       # (E, S, D): -0.5 log(2 pi sigma**2)
+    log_norm_sum: np.ndarray   # (E, S): its sum over channels
+    exact_inv2: np.ndarray     # (K, D): 1 / exact scale**2 (model 2, relative to model 0)
+    exact_log: np.ndarray      # (K, D): log exact scale
+    lower: np.ndarray          # (D,): input values are clamped into [lower, upper]
+    upper: np.ndarray          # (D,)
+    advance: np.ndarray        # (M, A + 1): P(advance by a states | speed level)
+    advance_tail: np.ndarray   # (M, A + 1): P(advance >= a), what lands on the last state
+    advance_range: np.ndarray  # (M, 2) int64: first and last nonzero advance of each level
+    speed_change: np.ndarray   # (M, 3): P(level m -> m - 1, m, m + 1)
+    initial_speed: np.ndarray  # (M,): speed level distribution of a new repetition
+    adapt: np.ndarray          # (2, 3): [forgetting factor, lowest, highest scale**2] per row
+    cap: float                 # squared z-scores are capped at this (inf: plain Gaussian)
+    prune: float               # edge states below this mass are dropped (0: never)
+    tilt: float                # steepest prior slope across a cell [nats per frame]
+    dual: bool                 # a recognition model (rows 1 and 2 of frame_loglik)
+
+
+class ForwardState(NamedTuple):
+    """What changes every frame (see the module docstring)."""
+
+    alpha: np.ndarray
+    rowsum: np.ndarray
+    logb: np.ndarray
+    support: np.ndarray
+    moments: np.ndarray
+    main: np.ndarray
+    fresh: np.ndarray
+    loglik: np.ndarray
+    frame_loglik: np.ndarray
+    scale2: np.ndarray
+    scale_weight: np.ndarray
+    restart: np.ndarray
+    subframe: np.ndarray
+    mixture: np.ndarray
+    xs: np.ndarray
+    observed: np.ndarray
+    mix: np.ndarray
+    residual: np.ndarray
+    sub: np.ndarray
+
+
+class Forward(NamedTuple):
+    """A forward model with what its owner needs to reset a state."""
+
+    model: ForwardModel
+    resolution: int            # states per template frame
+    restart: tuple[float, float]    # the chain's (from anywhere, from the last state)
+    scale_prior: np.ndarray    # (2,): weight of scale 1 at each reset, per row of scale2
+
+
+def _stacked(arrays: list[np.ndarray], owned: bool) -> np.ndarray:
+    """The (T_k, D) arrays one above the other in a new C-contiguous float64 array, or, when
+    there is one and it is ``owned`` (made here, not the caller's), that array itself."""
+    if owned and len(arrays) == 1:
+        return np.ascontiguousarray(arrays[0], dtype=np.float64)
+    return np.ascontiguousarray(np.concatenate(arrays, axis=0), dtype=np.float64)
+
+
+def upsample(values: np.ndarray, factor: int) -> np.ndarray:
+    """(T, D) -> (factor * (T - 1) + 1, D): linear interpolation, original frames kept."""
+    T, D = values.shape
+    out = np.empty((factor * (T - 1) + 1, D))
+    out[::factor] = values
+    for r in range(1, factor):
+        w = r / factor
+        out[r::factor] = (1.0 - w) * values[:-1] + w * values[1:]
+    return out
+
+
+def _adaptation(setting) -> tuple[np.ndarray, float]:
+    """([forgetting factor, lowest**2, highest**2], prior) of an online scale, or zeros."""
+    if setting is None:
+        return np.zeros(3), 0.0
+    memory, prior, lowest, highest = (float(v) for v in setting)
+    return np.array([np.exp(-1.0 / memory), lowest ** 2, highest ** 2]), prior
+
+
+def _emission_tables(sigmas: np.ndarray, rec: np.ndarray | None):
+    """weights = 1 / sigma**2 and log_norm = 0.5 log(weights / 2 pi) per emission model, in
+    place (each temporary of this size would be fresh memory to fault in)."""
+    models = (sigmas,) if rec is None else (sigmas, rec)
+    weights = np.empty((len(models),) + sigmas.shape)
+    for row, sigma in enumerate(models):
+        np.square(sigma, out=weights[row])
+    np.reciprocal(weights, out=weights)
+    log_norm = np.log(weights)
+    log_norm -= math.log(2.0 * math.pi)
+    log_norm *= 0.5
+    return weights, log_norm, log_norm.sum(axis=2)
+
+
+def _transition_tables(transitions: TransitionModel):
+    advance = np.ascontiguousarray(transitions.advance, dtype=np.float64)
+    # advance_tail[m, r] = P(advance >= r): what lands on the absorbing last state
+    tail = np.ascontiguousarray(np.cumsum(advance[:, ::-1], axis=1)[:, ::-1])
+    nonzero = advance > 0
+    span = np.ascontiguousarray(np.stack(
+        [nonzero.argmax(axis=1), nonzero.shape[1] - 1 - nonzero[:, ::-1].argmax(axis=1)],
+        axis=1), dtype=np.int64)
+    return (advance, tail, span,
+            np.ascontiguousarray(transitions.speed_change, dtype=np.float64),
+            np.ascontiguousarray(transitions.initial_speed, dtype=np.float64))
+
+
+def _exact_scales(exact, K: int, D: int) -> np.ndarray:
+    scales = np.ones((K, D))
+    if exact is None:
+        return scales
+    try:
+        scales[:] = exact
+    except ValueError:
+        raise ValueError(f"the exact-repetition scale must be a float or ({K}, {D}), got shape "
+                         f"{np.shape(exact)}") from None
+    if not (np.all(scales > 0.0) and np.all(np.isfinite(scales))):
+        raise ValueError(f"the exact-repetition scales must be finite and > 0, got "
+                         f"{scales.min()} to {scales.max()}")
+    return scales
+
+
+def build_forward(templates: list[np.ndarray], sigmas: list[np.ndarray], windows,
+                  transitions: TransitionModel, *, cap: float, prune: float, tilt: float,
+                  recognition: list[np.ndarray] | None = None, exact=None,
+                  adaptation=None, report_adaptation=None) -> Forward:
+    """The forward model of K followers that share one transition model.
+
+    templates, sigmas : K (T_k, D) float arrays (validated) [input units]; windows (K,) int
+        [template frames]; with ``transitions.resolution = R > 1`` each template and sigma is
+        upsampled to R (T_k - 1) + 1 states.
+    cap : squared z-scores are capped at it; prune : mass below which edge states are dropped;
+    tilt : see ``_kernels._tilt``.
+    recognition : K (T_k, D) sigmas of a second emission model that only scores frames, or
+        None; exact : with it, the exact-repetition component's scale relative to ``sigmas``
+        (a float or (K, D)), or None for no mixture.
+    adaptation, report_adaptation : (memory [frames], prior [frames], lowest, highest scale)
+        of the recursion's and the report's online emission scale, or None (fixed).
+    """
+    R = transitions.resolution
+    if R > 1:
+        # R states per template frame: the template and its sigmas, linearly interpolated
+        templates = [upsample(t, R) for t in templates]
+        sigmas = [upsample(s, R) for s in sigmas]
+        if recognition is not None:
+            recognition = [upsample(s, R) for s in recognition]
+        windows = np.asarray(windows) * R
+    K, D = len(templates), int(templates[0].shape[1])
+    if exact is not None and recognition is None:
+        raise ValueError("an exact-repetition mixture needs a recognition model")
+    lengths = np.array([t.shape[0] for t in templates], dtype=np.int64)
+    offsets = np.zeros(K, dtype=np.int64)
+    offsets[1:] = np.cumsum(lengths)[:-1]
+    # one template is taken as it is (R > 1: the upsampled copy); set-up time is mostly the
+    # first touch of fresh memory (page faults), so no array is copied that need not be
+    stacked = _stacked(templates, owned=R > 1)
+    sigma = _stacked(sigmas, owned=R > 1)
+    rec = None if recognition is None else _stacked(recognition, owned=R > 1)
+    weights, log_norm, log_norm_sum = _emission_tables(sigma, rec)
+    scales = _exact_scales(exact, K, D)
+    lo, hi = stacked.min(axis=0), stacked.max(axis=0)
+    span = CLAMP_SPAN * (hi - lo + sigma.max(axis=0))
+    adapt, prior = _adaptation(adaptation)
+    report, report_prior = _adaptation(report_adaptation)
+    model = ForwardModel(
+        stacked, offsets, lengths, np.ascontiguousarray(windows, dtype=np.int64), weights,
+        log_norm, log_norm_sum, np.ascontiguousarray(1.0 / scales ** 2),
+        np.ascontiguousarray(np.log(scales)), lo - span, hi + span,
+        *_transition_tables(transitions), np.stack([adapt, report]), float(cap), float(prune),
+        float(tilt), rec is not None)
+    return Forward(model, R, (transitions.restart_anywhere, transitions.restart),
+                   np.array([prior, report_prior]))
+
+
+def forward_state(forward: Forward) -> ForwardState:
+    """A fresh state for ``forward`` (reset)."""
+    model = forward.model
+    K, S, D = model.lengths.shape[0], model.templates.shape[0], model.templates.shape[1]
+    M = model.initial_speed.shape[0]
+    state = ForwardState(
+        alpha=np.zeros((2, S, M)), rowsum=np.zeros((2, S)), logb=np.zeros((3, S)),
+        support=np.zeros((K, 2, 2), dtype=np.int64), moments=np.zeros((K, 2, 3)),
+        main=np.zeros(K, dtype=np.int64), fresh=np.ones(K, dtype=np.bool_), loglik=np.zeros(K),
+        frame_loglik=np.zeros((3, K)), scale2=np.ones((2, K)), scale_weight=np.zeros((2, K)),
+        restart=np.tile(forward.restart, (K, 1)), subframe=np.zeros(K, dtype=np.bool_),
+        mixture=np.zeros(1), xs=np.zeros(D), observed=np.zeros(D), mix=np.zeros(M),
+        residual=np.zeros(S), sub=np.zeros((4, S)))
+    reset_forward(forward, state)
+    return state
+
+
+def reset_forward(forward: Forward, state: ForwardState) -> None:
+    """Forget every frame: the next one is the first of a performance (the owner's settings,
+    ``restart``, ``subframe`` and ``mixture``, are left as they are)."""
+    state.alpha[:] = 0.0
+    state.rowsum[:] = 0.0
+    state.support[:, :, 0] = 1
+    state.support[:, :, 1] = 0
+    state.moments[:] = 0.0
+    state.main[:] = 0
+    state.fresh[:] = True
+    state.loglik[:] = 0.0
+    state.frame_loglik[:] = 0.0
+    state.scale2[:] = 1.0
+    state.scale_weight[:] = forward.scale_prior[:, None]
+
+
+def check_frame(x, channels: int) -> np.ndarray:
+    """``x`` as a (channels,) float64 array, or ValueError naming both shapes."""
+    arr = np.ascontiguousarray(x, dtype=np.float64)
+    if arr.shape != (channels,):
+        raise ValueError(f"frame must have {channels} channel(s) (shape ({channels},)), got "
+                         f"shape {arr.shape}")
+    return arr

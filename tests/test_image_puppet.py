@@ -178,6 +178,7 @@ def _triangle_coverage(vertices, triangles, shape):
 def test_mesh_covers_character_and_little_background(momo):
     covered = _triangle_coverage(momo.vertices, momo.triangles, momo.mask.shape)
     assert np.all(covered[momo.mask]), "every character pixel lies in a kept triangle"
+    assert np.all(covered[momo.image[:, :, 3] > 0]), "and every pixel with some alpha"
     meshed_background = (covered & ~momo.mask).sum() / covered.sum()
     assert meshed_background < 0.25, meshed_background
 
@@ -214,18 +215,21 @@ def test_large_picture_meshed_downscaled_rendered_full_size(momo_path):
     from PIL import Image
     big = np.asarray(Image.open(momo_path).resize((2048, 2048), Image.BICUBIC))
     puppet = ImagePuppet.from_image(big, max_mesh_size=512)
-    # the mesh is the one of the picture downscaled to 512, scaled back to full-size pixels
     small = ImagePuppet.from_image(cv2.resize(big, (512, 512), interpolation=cv2.INTER_AREA))
     assert puppet.mesh_scale == pytest.approx(0.25)
     assert puppet.mask.shape == (2048, 2048) and puppet.image.shape == (2048, 2048, 4)
-    assert np.array_equal(puppet.triangles, small.triangles)
-    assert np.allclose(puppet.vertices, (small.vertices + 0.5) * 4 - 0.5)
-    assert puppet.cell_size == pytest.approx(4 * small.cell_size)
+    # the mesh is built on the mask downscaled to 512: the small picture's grid, scaled back
+    assert puppet.cell_size == pytest.approx(4 * small.cell_size, rel=0.02)
+    assert abs(len(puppet.triangles) - len(small.triangles)) <= 0.1 * len(small.triangles)
     upscaled = cv2.resize(small.mask.astype(np.uint8), (2048, 2048),
                           interpolation=cv2.INTER_NEAREST).astype(bool)
     assert _iou(puppet.mask, upscaled) > 0.97
+    # every pixel with some alpha lies on the rest mesh (rendered at full size)
+    covered = _triangle_coverage(puppet.vertices, puppet.triangles, puppet.mask.shape)
+    assert np.all(covered[puppet.image[:, :, 3] > 0])
     # pins are given in full-size pixels
-    assert puppet.add_pin((1024, 440)) == small.add_pin((256, 110))
+    index = puppet.add_pin((1024, 440))
+    assert np.linalg.norm(puppet.vertices[index] - (1024, 440)) <= puppet.cell_size
 
 
 # --- simulation -----------------------------------------------------------------------------
@@ -516,10 +520,10 @@ def test_uniform_image_is_rejected():
 
 def test_no_separable_foreground_is_rejected(rng):
     noise = rng.integers(0, 256, (128, 128, 3), dtype=np.uint8)
-    with pytest.raises(ValueError, match="no separable foreground"):
+    with pytest.raises(ValueError, match="the background is not plain"):
         ImagePuppet.from_image(noise)
     photo = _photo()
-    with pytest.raises(ValueError, match="no separable foreground"):
+    with pytest.raises(ValueError, match="the background is not plain: .* varies by"):
         ImagePuppet.from_image(photo)
     speck = np.full((200, 200, 3), 240, np.uint8)
     speck[100:103, 100:103] = 0

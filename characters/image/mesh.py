@@ -111,16 +111,26 @@ class GridMesh:
         return inside
 
 
-def build_grid_mesh(mask: np.ndarray, cell_size: float) -> GridMesh:
+def build_grid_mesh(mask: np.ndarray, cell_size: float, *, margin: int = 0) -> GridMesh:
     """Triangulate a character mask on a regular grid.
 
-    mask : (H, W) bool (one connected component); cell_size : float [px] grid spacing.
+    mask : (H, W) bool (one connected component); cell_size : float [px] grid spacing;
+    margin : int [px]: cells holding a pixel within this many pixels (chessboard distance) of
+    the character are kept too. A picture's alpha reaches past its mask's pixel centres (a
+    pixel is a square, and bilinear sampling reads one more texel), so a margin of 1 keeps
+    all of a feathered edge on the mesh, and 2 when the mask was downscaled for meshing;
+    without it, a deformed mesh would cut the edge along its cells.
     """
     if not np.isfinite(cell_size) or cell_size < 2.0:
         raise ValueError(f"cell_size must be at least 2 pixels (of the meshed picture), got "
                          f"{cell_size}")
     contours = character_contours(mask)
-    ys, xs = np.nonzero(mask)
+    if margin > 0:
+        cv2 = require_cv2()
+        square = np.ones((2 * margin + 1, 2 * margin + 1), np.uint8)
+        ys, xs = np.nonzero(cv2.dilate(mask.astype(np.uint8), square))
+    else:
+        ys, xs = np.nonzero(mask)
     low = np.array([xs.min(), ys.min()], dtype=np.float64)
     span = np.array([xs.max(), ys.max()], dtype=np.float64) - low
     counts = np.floor(span / cell_size).astype(int) + 1          # cells along x, y

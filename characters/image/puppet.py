@@ -51,7 +51,7 @@ from ..materials import Material, material_names
 from ..materials import material as lookup_material
 from ..model import MassSpring
 from .arap import ArapDeformer
-from .background import load_image, remove_background, require_cv2
+from .background import load_image, remove_background, require_cv2, shrink_any
 from .bake import BakedMotion, bake_motion
 from .guard import NoFoldConstraint
 from .mesh import GridMesh, build_grid_mesh, signed_areas
@@ -129,6 +129,8 @@ class ImagePuppet:
     faces : the same triangles; springs : (M, 2) int; uv : (N, 2) float in [0, 1]: texture
     coordinates (u = (x + 0.5) / W, v = (y + 0.5) / H, v pointing down the picture)
     contour : (K, 2) float [px]: the character's outer contour
+    kind : str: how the character was found ("alpha", "plain", "photo", "drawing", or
+    "given" for a mask handed in); notes : tuple of str: what the cut-out wants a user to know
     cell_size : float [px]; mesh_scale : float: meshed resolution / picture resolution (< 1 for
     large pictures, which are meshed on a downscaled copy and rendered at full size)
     model : MassSpring, state : SpringState; mode : PuppetMode; material : Material
@@ -136,7 +138,8 @@ class ImagePuppet:
     """
 
     def __init__(self, *, image: np.ndarray, mask: np.ndarray, mesh: GridMesh,
-                 mesh_scale: float, material="rubber", mode="springs"):
+                 mesh_scale: float, material="rubber", mode="springs", kind: str = "given",
+                 notes: tuple = ()):
         try:
             self.mode = PuppetMode(mode)
         except ValueError:
@@ -145,6 +148,8 @@ class ImagePuppet:
         self.material = image_material(material)
         self.image = image
         self.mask = mask
+        self.kind = str(kind)
+        self.notes = tuple(notes)
         self.mesh_scale = float(mesh_scale)
         self._mesh = mesh
         to_full = self._to_picture
@@ -187,51 +192,49 @@ class ImagePuppet:
     def from_image(cls, image, *, cell_size: float | None = None,
                    tolerance: float | None = None, feather: float = 1.5,
                    material="rubber", mode="springs",
-                   max_mesh_size: int = DEFAULT_MAX_MESH_SIZE) -> "ImagePuppet":
+                   max_mesh_size: int = DEFAULT_MAX_MESH_SIZE, kind="auto",
+                   close_gaps: float | None = None) -> "ImagePuppet":
         """Build a puppet from a picture.
 
         image : path | (H, W) | (H, W, 3) | (H, W, 4) array (uint8, uint16, float in [0, 1]).
-            An alpha channel that is not fully opaque is used as the character's mask;
-            otherwise the background colour is estimated from the corners and removed.
+            An alpha channel with transparent parts is used as the character's mask; a plain
+            background is keyed out by its colour; a background lit unevenly is modelled as a
+            smooth light field, and a pen drawing on paper is filled inside its outline
+            (characters/image/background.py)
+        kind : "auto" | "alpha" | "plain" | "photo" | "drawing": force one way of finding
+            the character (see characters.image.background.PictureKind)
+        close_gaps : float [px] | None: a drawing's outline is closed across gaps up to this
+            wide (default three stroke widths)
         cell_size : float [px of the picture] grid spacing; default: the character's longer
             side / 24
-        tolerance : float [0..255 RGB distance]: background colour tolerance; default
-            max(32, 1.5 x the corner noise)
+        tolerance : float [0..255 RGB distance]: how far from the background a colour must
+            be to stand out; default from the background's noise
         feather : float [px]: alpha ramp inside the edge (pictures with alpha keep theirs)
         material : "liquid" | "fabric" | "rubber" | "rigid" (characters/materials.toml) or a
             characters.Material with a per-mass stiffness
         mode : "springs" | "arap"
-        max_mesh_size : int [px]: pictures with a longer side above this are cut out and
-            meshed on a downscaled copy; the mask and image stay full size and the mesh is
+        max_mesh_size : int [px]: pictures with a longer side above this are meshed on a
+            downscaled copy of the mask; the mask and image stay full size and the mesh is
             scaled back, so rendering is at full resolution
         """
-        cv2 = require_cv2()
+        require_cv2()
         picture = load_image(image)
         height, width = picture.shape[:2]
         if not isinstance(max_mesh_size, (int, np.integer)) or max_mesh_size < 64:
             raise ValueError(f"max_mesh_size must be an int >= 64 [px], got {max_mesh_size!r}")
+        cutout = remove_background(picture, kind=kind, tolerance=tolerance, feather=feather,
+                                   close_gaps=close_gaps)
+        for note in cutout.notes:
+            log.warning(note)
+        mask, rgba = cutout.mask, cutout.rgba
         scale = min(1.0, max_mesh_size / max(height, width))
+        mask_small = mask
         if scale < 1.0:
             small_size = (max(1, round(width * scale)), max(1, round(height * scale)))
-            small = cv2.resize(picture, small_size, interpolation=cv2.INTER_AREA)
-            scale = small.shape[1] / width
-            log.info("picture %dx%d meshed at %dx%d", width, height, small.shape[1],
-                     small.shape[0])
-            cutout = remove_background(small, tolerance=tolerance, feather=feather)
-            mask_small = cutout.mask
-            mask = cv2.resize(mask_small.astype(np.uint8), (width, height),
-                              interpolation=cv2.INTER_LINEAR) > 0
-            if picture.shape[2] == 4:
-                rim = cv2.dilate(mask.astype(np.uint8), np.ones((5, 5), np.uint8)).astype(bool)
-                alpha = np.where(rim, picture[:, :, 3], 0).astype(np.uint8)
-            else:
-                from .background import feather_alpha
-                alpha = feather_alpha(mask, feather / scale)
-            rgba = np.dstack([picture[:, :, :3], alpha])
-        else:
-            cutout = remove_background(picture, tolerance=tolerance, feather=feather)
-            mask_small = mask = cutout.mask
-            rgba = cutout.rgba
+            # a mesh pixel is character if any of the picture's pixels it covers is
+            mask_small = shrink_any(mask, small_size)
+            scale = small_size[0] / width
+            log.info("picture %dx%d meshed at %dx%d", width, height, *small_size)
 
         ys, xs = np.nonzero(mask_small)
         long_side = max(xs.max() - xs.min(), ys.max() - ys.min()) + 1
@@ -245,9 +248,10 @@ class ImagePuppet:
             if mesh_cell < 2.0:
                 raise ValueError(f"cell_size {cell_size:g} px is too small: it must be at least "
                                  f"{2.0 / scale:g} px for this picture")
-        mesh = build_grid_mesh(mask_small, mesh_cell)
+        # every pixel with some alpha, and its bilinear footprint, lies on the mesh
+        mesh = build_grid_mesh(mask_small, mesh_cell, margin=1 if scale == 1.0 else 2)
         return cls(image=rgba, mask=mask, mesh=mesh, mesh_scale=scale, material=material,
-                   mode=mode)
+                   mode=mode, kind=cutout.kind.value, notes=cutout.notes)
 
     def _to_picture(self, points: np.ndarray) -> np.ndarray:
         """Mesh-resolution pixel coordinates -> picture pixel coordinates (pixel centres)."""

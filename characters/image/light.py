@@ -1,0 +1,274 @@
+"""The background of a picture under real light: a smooth colour field, and what differs from it.
+
+A phone photo of a toy on a table or of a drawing on paper has no single background colour: a
+lamp on one side, a vignette, a shadow. Here the background is a smooth field per channel, a
+low-order polynomial in the picture's coordinates, fitted robustly (trimmed least squares):
+first to the border band (where the character rarely is), then again to every pixel the first
+fit called background, one degree higher. A pixel is foreground when its colour differs from
+the field by more than a threshold set by the background's own noise. The edge of a solid
+character is then refined with OpenCV's GrabCut, seeded from that first mask, on the picture
+with the light divided out (so the background becomes flat for its colour models); a soft
+shadow the character casts on the background (the field's own colour, only darker, and as
+smooth as the background) stays background.
+
+Conventions: images (H, W, 3) float32 or uint8 RGB on the 0..255 scale, rows top to bottom;
+colour distances are Euclidean in RGB.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .background import require_cv2
+
+FIT_SIZE = 96              # [px] the field is fitted on a copy at most this big
+BORDER_FRACTION = 0.08     # the first fit's border band, as a fraction of the shorter side
+FIRST_DEGREE = 2           # polynomial degree of the fit to the border band
+REFIT_DEGREE = 3           # and of the fit to all of the background
+NOISE_MULTIPLE = 5.4       # threshold = this x the median residual of background pixels ...
+THRESHOLD_FLOOR = 12.0     # ... but at least this [0..255 RGB distance]
+EDGE_BAND = 6              # [px] GrabCut decides this far either side of the first edge
+GRABCUT_ITERATIONS = 2
+SHADOW_DARKEST = 0.35      # a shadow keeps at least this fraction of the background's light
+SHADOW_HUE = 0.06          # and its colour's direction within this (chromaticity distance)
+SHADOW_TEXTURE = 3.0       # and is as smooth as the background: within 3 x its noise
+
+
+def polynomial_terms(u: np.ndarray, v: np.ndarray, degree: int) -> np.ndarray:
+    """(..., T) float: the monomials u^i v^j, i + j <= degree, of coordinates in [-1, 1]."""
+    columns = [u ** (total - j) * v ** j for total in range(degree + 1) for j in range(total + 1)]
+    return np.stack(columns, axis=-1)
+
+
+@dataclass(frozen=True)
+class BackgroundField:
+    """A smooth background colour over the picture.
+
+    coefficients : (T, 3) float: per channel, the polynomial in u = 2 (x + 0.5) / W - 1,
+    v = 2 (y + 0.5) / H - 1; degree : int; noise : float [0..255]: the median distance of
+    background pixels to the field (their noise); threshold : float [0..255]: colours
+    farther than this from the field are foreground."""
+
+    coefficients: np.ndarray
+    degree: int
+    noise: float
+    threshold: float
+
+    def evaluate(self, height: int, width: int) -> np.ndarray:
+        """(height, width, 3) float32: the field at every pixel."""
+        return evaluate_field(self.coefficients, self.degree, height, width)
+
+
+def evaluate_field(coefficients: np.ndarray, degree: int, height: int,
+                   width: int) -> np.ndarray:
+    """(height, width, 3) float32: a polynomial colour field (coefficients (T, 3)) at every
+    pixel, computed on a coarse grid and interpolated (the field is smooth)."""
+    cv2 = require_cv2()
+    scale = min(1.0, FIT_SIZE / max(height, width))
+    grid_w, grid_h = max(2, round(width * scale)), max(2, round(height * scale))
+    ys, xs = np.mgrid[0:grid_h, 0:grid_w]
+    terms = polynomial_terms(2 * (xs + 0.5) / grid_w - 1, 2 * (ys + 0.5) / grid_h - 1, degree)
+    coarse = (terms @ coefficients).astype(np.float32)
+    return cv2.resize(coarse, (width, height), interpolation=cv2.INTER_LINEAR)
+
+
+def channel_sum(image: np.ndarray) -> np.ndarray:
+    """(H, W) float32: the sum of an (H, W, 3) image's channels (faster than a strided sum)."""
+    cv2 = require_cv2()
+    return cv2.transform(image.astype(np.float32, copy=False), np.ones((1, 3), np.float32))
+
+
+def colour_distance(image: np.ndarray, other: np.ndarray) -> np.ndarray:
+    """(H, W) float32: per-pixel Euclidean RGB distance of two (H, W, 3) float32 images."""
+    cv2 = require_cv2()
+    difference = cv2.subtract(image, other)
+    squares = cv2.multiply(difference, difference)
+    return cv2.sqrt(cv2.transform(squares, np.ones((1, 3), np.float32)))
+
+
+def border_band(height: int, width: int, fraction: float = BORDER_FRACTION) -> np.ndarray:
+    """(H, W) bool: the picture's outer band, `fraction` of the shorter side wide."""
+    width_px = max(2, round(fraction * min(height, width)))
+    band = np.zeros((height, width), bool)
+    band[:width_px] = band[-width_px:] = True
+    band[:, :width_px] = band[:, -width_px:] = True
+    return band
+
+
+def fit_field(image: np.ndarray, candidates: np.ndarray, degree: int, *,
+              iterations: int = 6, first_keep: float = 0.6) -> tuple[np.ndarray, float]:
+    """Robust least-squares fit of a smooth colour field to the candidate pixels.
+
+    image : (H, W, 3) float32; candidates : (H, W) bool, pixels that may be background.
+    The fit runs on a copy at most FIT_SIZE px (cells wholly made of candidates). The first
+    pass keeps the `first_keep` best-fitting fraction (a character covering part of the band
+    is outvoted), later passes keep what lies within 3.5 robust standard deviations.
+    Returns (coefficients (T, 3), median residual distance of the kept pixels [0..255])."""
+    cv2 = require_cv2()
+    height, width = candidates.shape
+    scale = min(1.0, FIT_SIZE / max(height, width))
+    grid_w, grid_h = max(8, round(width * scale)), max(8, round(height * scale))
+    small = cv2.resize(image, (grid_w, grid_h), interpolation=cv2.INTER_AREA)
+    whole = cv2.resize(candidates.astype(np.float32), (grid_w, grid_h),
+                       interpolation=cv2.INTER_AREA) > 0.99
+    ys, xs = np.nonzero(whole)
+    terms = polynomial_terms(2 * (xs + 0.5) / grid_w - 1, 2 * (ys + 0.5) / grid_h - 1, degree)
+    if len(ys) < 2 * terms.shape[1]:
+        raise ValueError("too little background is visible to model its light: the character "
+                         "fills the picture; give a picture with background around it")
+    colours = small[ys, xs].astype(np.float64)
+    keep = np.ones(len(ys), bool)
+    for iteration in range(iterations):
+        kept = terms[keep]
+        # normal equations: monomials of degree <= 3 on [-1, 1] are well conditioned
+        coefficients = np.linalg.solve(kept.T @ kept, kept.T @ colours[keep])
+        distance = np.linalg.norm(colours - terms @ coefficients, axis=1)
+        if iteration == 0:
+            keep = distance <= np.quantile(distance, first_keep)
+        else:
+            # the distance of 3D Gaussian noise has median 1.54 sigma
+            sigma = np.median(distance[keep]) / 1.54
+            keep = distance <= max(3.5 * 1.54 * 1.4 * sigma, 4.0)
+    return coefficients, float(np.median(distance[keep]))
+
+
+@dataclass(frozen=True)
+class LitSegmentation:
+    """foreground : (H, W) bool, colours off the field by more than its threshold;
+    residual : (H, W) float32 [0..255], each pixel's distance to the field (on the lightly
+    smoothed picture); field : BackgroundField; background : (H, W, 3) float32, the field
+    evaluated; smoothed : (H, W, 3) float32, the picture the residual was measured on."""
+
+    foreground: np.ndarray
+    residual: np.ndarray
+    field: BackgroundField
+    background: np.ndarray
+    smoothed: np.ndarray
+
+
+def segment_by_field(rgb: np.ndarray, *, threshold: float | None = None) -> LitSegmentation:
+    """Fit the background field (border band, then all background) and threshold the residual.
+
+    rgb : (H, W, 3) uint8; threshold : [0..255 RGB distance] or None (from the noise)."""
+    cv2 = require_cv2()
+    height, width = rgb.shape[:2]
+    # a light blur takes the sensor and JPEG noise down while keeping 2 px pen lines
+    smoothed = cv2.GaussianBlur(rgb.astype(np.float32), (0, 0), 1.0)
+    candidates = border_band(height, width)
+    foreground = None
+    for degree in (FIRST_DEGREE, REFIT_DEGREE):
+        if foreground is not None:
+            near = cv2.dilate(foreground.astype(np.uint8), np.ones((9, 9), np.uint8))
+            candidates = near == 0
+        coefficients, _ = fit_field(smoothed, candidates, degree)
+        background = evaluate_field(coefficients, degree, height, width)
+        residual = colour_distance(smoothed, background)
+        # the noise of single pixels (the fit's coarse copy averages it away); a character
+        # covering part of the candidates cannot move a median much
+        noise = float(np.median(residual[candidates]))
+        level = threshold if threshold is not None else max(THRESHOLD_FLOOR,
+                                                             NOISE_MULTIPLE * noise)
+        foreground = residual > level
+    field = BackgroundField(coefficients=coefficients, degree=degree, noise=noise,
+                            threshold=float(level))
+    return LitSegmentation(foreground=foreground, residual=residual, field=field,
+                           background=background, smoothed=smoothed)
+
+
+def shadow_pixels(segmentation: LitSegmentation) -> np.ndarray:
+    """(H, W) bool: foreground pixels that are the background in shadow: the field's colour
+    direction (chromaticity), darker by a factor in [SHADOW_DARKEST, 1), and smooth (no
+    texture beyond the background's noise). Thin dark lines (pencil strokes) are kept out:
+    a shadow is as wide as several of them."""
+    cv2 = require_cv2()
+    # JPEG keeps colour at a quarter of the resolution: judge the hue on a smoother copy
+    picture = cv2.GaussianBlur(segmentation.smoothed, (0, 0), 1.5)
+    background = segmentation.background
+    light = channel_sum(picture)
+    expected = np.maximum(channel_sum(background), 1.0)
+    ratio = light / expected
+    chroma = picture / np.maximum(light, 1.0)[:, :, None]
+    hue_off = channel_sum(np.abs(chroma - background / expected[:, :, None]))
+    candidate = (segmentation.foreground & (ratio >= SHADOW_DARKEST) & (ratio < 1.0)
+                 & (hue_off <= SHADOW_HUE))
+    # smooth: the picture equals the field times a slowly varying darkening, within noise
+    darkening = cv2.GaussianBlur(ratio.astype(np.float32), (0, 0), 2.0)
+    texture = colour_distance(segmentation.smoothed, background * darkening[:, :, None])
+    candidate &= texture <= SHADOW_TEXTURE * max(segmentation.field.noise, 1.0)
+    size = max(3, round(0.015 * min(candidate.shape)))
+    kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (size, size))
+    return cv2.morphologyEx(candidate.astype(np.uint8), cv2.MORPH_OPEN, kernel) > 0
+
+
+def refine_edge(rgb: np.ndarray, background: np.ndarray, mask: np.ndarray, *,
+                sure_background: np.ndarray | None = None, band: int = EDGE_BAND,
+                iterations: int = GRABCUT_ITERATIONS) -> np.ndarray:
+    """GrabCut seeded from a first mask: (H, W) bool.
+
+    rgb : (H, W, 3) uint8; background : (H, W, 3) float32, the light field, divided out so
+    the background's colour model is tight; mask : (H, W) bool, the first mask. Pixels more
+    than `band` px inside the first mask are sure foreground, more than `band` px outside
+    sure background, and so is `sure_background` (H, W) bool (shadows); GrabCut decides the
+    band between, on the bounding box of the band."""
+    cv2 = require_cv2()
+    mean = np.array(cv2.mean(background)[:3], np.float32)
+    flat = rgb.astype(np.float32) / np.maximum(background, 1.0) * mean
+    flat = np.clip(flat, 0, 255).astype(np.uint8)
+    first = mask.astype(np.uint8)
+    square = np.ones((3, 3), np.uint8)
+    inner = cv2.erode(first, square, iterations=band)
+    outer = cv2.dilate(first, square, iterations=band)
+    labels = np.full(mask.shape, cv2.GC_BGD, np.uint8)
+    labels[outer > 0] = cv2.GC_PR_BGD
+    labels[first > 0] = cv2.GC_PR_FGD
+    labels[inner > 0] = cv2.GC_FGD
+    if sure_background is not None:
+        labels[sure_background & (inner == 0)] = cv2.GC_BGD
+    ys, xs = np.nonzero(outer)
+    top, bottom = max(0, ys.min() - 2), min(mask.shape[0], ys.max() + 3)
+    left, right = max(0, xs.min() - 2), min(mask.shape[1], xs.max() + 3)
+    window = np.ascontiguousarray(labels[top:bottom, left:right])
+    if not ((window == cv2.GC_PR_FGD) | (window == cv2.GC_FGD)).any() or \
+            not ((window == cv2.GC_PR_BGD) | (window == cv2.GC_BGD)).any():
+        return mask.copy()
+    background_model = np.zeros((1, 65), np.float64)
+    foreground_model = np.zeros((1, 65), np.float64)
+    cv2.grabCut(np.ascontiguousarray(flat[top:bottom, left:right]), window, None,
+                background_model, foreground_model, iterations, cv2.GC_INIT_WITH_MASK)
+    refined = np.zeros_like(mask)
+    refined[top:bottom, left:right] = (window == cv2.GC_FGD) | (window == cv2.GC_PR_FGD)
+    return refined
+
+
+def settle_edge(rgb: np.ndarray, background: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """(H, W) bool: the mask without its edge pixels that are closer to the background field
+    than to the colour of the nearest pixel well inside the character. An edge pixel mixing
+    both (optics, scaling) is the character's when it is more than half character; GrabCut's
+    tight model of a backdrop with the light divided out takes every mixed pixel for the
+    character, its mask half a pixel too far out on average (measured on photos shrunk 2x,
+    area 0.5 % too large; with this pass 0.3 % too small, IoU 0.9840 -> 0.9855).
+
+    rgb : (H, W, 3) uint8; background : (H, W, 3) float32 (the field); mask : (H, W) bool."""
+    cv2 = require_cv2()
+    square = np.ones((3, 3), np.uint8)
+    first = mask.astype(np.uint8)
+    band = mask & ~(cv2.erode(first, square) > 0)
+    inner = cv2.erode(first, square, iterations=2)
+    if not inner.any():
+        return mask.copy()
+    # the nearest inner pixel of every pixel: labels number the zero pixels of `outside`
+    outside = (inner == 0).astype(np.uint8)
+    _, labels = cv2.distanceTransformWithLabels(outside, cv2.DIST_L2, 3,
+                                                labelType=cv2.DIST_LABEL_PIXEL)
+    ys, xs = np.nonzero(band)
+    sources = np.flatnonzero(outside.ravel() == 0)   # label k is the k-th zero pixel, row-major
+    nearest = sources[labels[ys, xs] - 1]
+    picture = rgb.astype(np.float32)
+    colour = picture[ys, xs]
+    inside = picture.reshape(-1, 3)[nearest]
+    to_background = np.linalg.norm(colour - background[ys, xs], axis=1)
+    to_character = np.linalg.norm(colour - inside, axis=1)
+    settled = mask & ~band
+    settled[ys[to_background > to_character], xs[to_background > to_character]] = True
+    return settled

@@ -6,6 +6,8 @@ from pathlib import Path
 
 
 def register(subparsers) -> None:
+    from mop.commands._args import port, seconds_or_zero
+
     parser = subparsers.add_parser(
         "demo", help="perform the shipped demo (two replayed performers, three characters)",
         description="Replays the shipped demo takes (recordings/demo): a data-glove performer "
@@ -17,13 +19,13 @@ def register(subparsers) -> None:
                              "demo.mp4)")
     parser.add_argument("--session", default=None, metavar="TOML",
                         help="another session file to perform instead of the shipped one")
-    parser.add_argument("--preview", type=int, default=None, metavar="PORT",
+    parser.add_argument("--preview", type=port, default=None, metavar="PORT",
                         help="also serve the live preview page (0 = any free port); implies "
                              "real time")
     parser.add_argument("--realtime", action="store_true", help="play in real time")
     parser.add_argument("--still", default=None, metavar="PNG",
                         help="also save one frame as a PNG (see --still-at)")
-    parser.add_argument("--still-at", type=float, default=4.0, metavar="SECONDS",
+    parser.add_argument("--still-at", type=seconds_or_zero, default=4.0, metavar="SECONDS",
                         help="session time of the --still frame (default 4.0)")
     parser.add_argument("--quiet", action="store_true", help="no progress lines")
     parser.set_defaults(func=run)
@@ -85,4 +87,10 @@ def run(args) -> int:
     if interrupted:
         print("interrupted: every output was finalised", file=sys.stderr)
         return 130
+    for output in extra:
+        if not output.frames:
+            from mop.commands._args import CommandError
+            raise CommandError(f"--still-at {args.still_at:g}: the session ended at "
+                               f"{report.frames / config.fps:.2f} s before that frame; no "
+                               f"still was written to {output.path}")
     return 0

@@ -7,6 +7,8 @@ import time
 
 
 def register(subparsers) -> None:
+    from mop.commands._args import port, seconds
+
     parser = subparsers.add_parser(
         "perform", help="perform a session: performers drive characters, live or from takes",
         description="Run a session file: every performer's input is followed, the recognised "
@@ -23,13 +25,13 @@ def register(subparsers) -> None:
                         help="keep real time even when every performer is replayed")
     parser.add_argument("--loop", action="store_true",
                         help="loop replayed takes (a show that runs until Ctrl-C)")
-    parser.add_argument("--duration", type=float, default=None, metavar="SECONDS",
+    parser.add_argument("--duration", type=seconds, default=None, metavar="SECONDS",
                         help="stop after this much session time")
     parser.add_argument("--out", default=None, metavar="PATH",
                         help="video file (.mp4, .mkv, .gif) or a folder for PNG frames with alpha")
     parser.add_argument("--png", default=None, metavar="FOLDER",
                         help="also write a PNG sequence with alpha")
-    parser.add_argument("--preview", type=int, default=None, metavar="PORT",
+    parser.add_argument("--preview", type=port, default=None, metavar="PORT",
                         help="serve the live preview page on this port (0 = any free port)")
     parser.add_argument("--preview-host", default=None, metavar="HOST",
                         help="address for the preview page (default 127.0.0.1)")
@@ -125,6 +127,10 @@ def run(args) -> int:
     if args.no_render and (args.out or args.png):
         raise ValueError("--out and --png need pictures: leave out --no-render")
     mode = Mode.REPLAY if args.replay is not None and not args.realtime else Mode.LIVE
+    if mode is Mode.REPLAY and args.loop and args.duration is None:
+        raise ValueError("--loop replays the takes forever, and without --realtime as fast as "
+                         "the machine goes (a video without end): give --duration SECONDS, or "
+                         "--realtime for a show that runs until Ctrl-C")
     osc = parse_host_port(args.osc_out, key="--osc-out") if args.osc_out else None
     out = args.out
     overrides = Overrides(replay=replay, video=out, png=args.png, osc=osc,

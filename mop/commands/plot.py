@@ -5,6 +5,8 @@ from pathlib import Path
 
 
 def register(subparsers) -> None:
+    from mop.commands._args import whole_rate
+
     parser = subparsers.add_parser(
         "plot", help="draw a follower trace of a take to a PNG",
         description="Feeds a take's action stream, frame by frame at the session rate, to a "
@@ -19,7 +21,8 @@ def register(subparsers) -> None:
                              "match the take)")
     parser.add_argument("--takes", default=None, metavar="FOLDER",
                         help="the take store when no session is given (default: the demo's)")
-    parser.add_argument("--fps", type=int, default=25, help="follower rate without a session")
+    parser.add_argument("--fps", type=whole_rate, default=25,
+                        help="follower rate without a session (default 25)")
     parser.add_argument("--out", default=None, metavar="PNG",
                         help="output picture (default: TAKE-trace.png)")
     parser.set_defaults(func=run)

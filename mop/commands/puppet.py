@@ -16,6 +16,8 @@ from pathlib import Path
 
 
 def register(subparsers) -> None:
+    from mop.commands._args import positive, rate, seconds_or_zero
+
     parser = subparsers.add_parser(
         "puppet", help="animate a picture as an elastic puppet and render it",
         description="Animate a picture of a character as an elastic 2D puppet: background "
@@ -37,10 +39,10 @@ def register(subparsers) -> None:
     parser.add_argument("--background", default=None,
                         help="transparent, #rrggbb or chroma (default: transparent if the "
                              "format keeps alpha, else white)")
-    parser.add_argument("--fps", type=float, default=25.0, help="frames per second (25)")
-    parser.add_argument("--duration", type=float, default=None,
+    parser.add_argument("--fps", type=rate, default=25.0, help="frames per second (25)")
+    parser.add_argument("--duration", type=seconds_or_zero, default=None,
                         help="seconds to render (default: the motion's duration)")
-    parser.add_argument("--cell-size", type=float, default=None,
+    parser.add_argument("--cell-size", type=positive, default=None,
                         help="mesh cell size in picture pixels (default: 1/24 of the character)")
     parser.add_argument("--tolerance", type=float, default=None,
                         help="background colour tolerance, 0..255 (default: automatic)")

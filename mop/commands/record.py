@@ -18,6 +18,8 @@ PREVIEW_FPS = 25
 
 
 def register(subparsers) -> None:
+    from mop.commands._args import rate, seconds, seconds_or_zero
+
     parser = subparsers.add_parser(
         "record", help="record a take: act along with a motion while a source is captured",
         description="Plays a motion (countdown and progress in the terminal, plus a preview "
@@ -36,14 +38,14 @@ def register(subparsers) -> None:
                         help="the take folder (default: recordings)")
     parser.add_argument("--name", default=None, help="the take's name (default: "
                                                      "PERFORMER-ACTION-NNN)")
-    parser.add_argument("--rate", type=float, default=50.0,
+    parser.add_argument("--rate", type=rate, default=50.0,
                         help="session rate [Hz] the take's template is sampled at (default 50)")
-    parser.add_argument("--countdown", type=float, default=3.0,
+    parser.add_argument("--countdown", type=seconds_or_zero, default=3.0,
                         help="seconds of countdown before the motion starts (default 3)")
     parser.add_argument("--preview", default=None, metavar="VIDEO",
                         help="where to write the motion preview video (default: "
                              "out/preview-ACTION.mp4; 'none' to skip)")
-    parser.add_argument("--wait", type=float, default=5.0,
+    parser.add_argument("--wait", type=seconds, default=5.0,
                         help="seconds to wait for the source's first frame (default 5)")
     parser.set_defaults(func=run)
 

@@ -12,6 +12,8 @@ import time
 
 
 def register(subparsers) -> None:
+    from mop.commands._args import seconds
+
     parser = subparsers.add_parser(
         "send", help="send a performer's input to a session on another machine (OSC)",
         description="Opens a capture source (hid:..., camera:..., osc:..., replay:PATH) and "
@@ -23,7 +25,7 @@ def register(subparsers) -> None:
                         help="where the session listens")
     parser.add_argument("--address", default="/mop/input", help="OSC address (default "
                                                                 "/mop/input)")
-    parser.add_argument("--duration", type=float, default=None, metavar="SECONDS",
+    parser.add_argument("--duration", type=seconds, default=None, metavar="SECONDS",
                         help="stop after this long")
     parser.add_argument("--quiet", action="store_true")
     parser.set_defaults(func=run)
@@ -67,4 +69,8 @@ def run(args) -> int:
             pass
     if not args.quiet:
         print(f"sent {sent} frames", file=sys.stderr)
+    if sent == 0:
+        from mop.commands._args import CommandError
+        status = getattr(source.status, "value", source.status)
+        raise CommandError(f"{args.source} gave no frame to send (status {status})")
     return 0

@@ -1,0 +1,90 @@
+"""Argument types every command shares, checked when the command line is parsed (argparse then
+prints `mop CMD: error: argument --x: ...` and exits 2), so bad numbers never reach the work.
+
+    parser.add_argument("--preview", type=port, ...)          # 0..65535 (0 = any free port)
+    parser.add_argument("--duration", type=seconds, ...)      # finite, > 0
+    parser.add_argument("--countdown", type=seconds_or_zero)  # finite, >= 0
+    parser.add_argument("--fps", type=rate, ...)              # finite, > 0, at most MAX_RATE
+
+`CommandError` is the error a command raises for anything the user can fix; `mop.cli.main`
+prints it as one line (exit 1), like ValueError / OSError.
+"""
+from __future__ import annotations
+
+import argparse
+import math
+
+MAX_RATE = 1000.0       # [Hz] frames per second no command needs more of (a glove streams ~100)
+MAX_SECONDS = 24 * 3600.0   # [s] one day: longer durations are a typo, not a show
+
+
+class CommandError(Exception):
+    """What a user did wrong or must fix, in one line; `exit_code` is what `mop` returns."""
+
+    def __init__(self, message: str, *, exit_code: int = 1):
+        super().__init__(message)
+        self.exit_code = exit_code
+
+
+def _number(text: str, what: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{what} must be a number, got {text!r}") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"{what} must be a finite number, got {text!r}")
+    return value
+
+
+def port(text: str) -> int:
+    """A TCP/UDP port: an integer 0..65535 (0 = any free port)."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"a port is an integer 0..65535, got {text!r}") from None
+    if not 0 <= value <= 65535:
+        raise argparse.ArgumentTypeError(f"a port is an integer 0..65535 (0 = any free port), "
+                                         f"got {value}")
+    return value
+
+
+def seconds(text: str) -> float:
+    """A duration [s]: finite, > 0 and at most a day."""
+    value = _number(text, "a duration")
+    if not 0 < value <= MAX_SECONDS:
+        raise argparse.ArgumentTypeError(f"a duration is > 0 and at most {MAX_SECONDS:g} s "
+                                         f"(a day), got {text}")
+    return value
+
+
+def seconds_or_zero(text: str) -> float:
+    """A time [s]: finite, >= 0 and at most a day."""
+    value = _number(text, "a time")
+    if not 0 <= value <= MAX_SECONDS:
+        raise argparse.ArgumentTypeError(f"a time is >= 0 and at most {MAX_SECONDS:g} s "
+                                         f"(a day), got {text}")
+    return value
+
+
+def rate(text: str) -> float:
+    """A rate [Hz] (frames per second): finite, > 0, at most MAX_RATE."""
+    value = _number(text, "a rate")
+    if not 0 < value <= MAX_RATE:
+        raise argparse.ArgumentTypeError(f"a rate is > 0 and at most {MAX_RATE:g} Hz, got {text}")
+    return value
+
+
+def whole_rate(text: str) -> int:
+    """A rate [Hz] that must be a whole number of frames per second."""
+    value = rate(text)
+    if value != int(value):
+        raise argparse.ArgumentTypeError(f"a rate here is a whole number of Hz, got {text}")
+    return int(value)
+
+
+def positive(text: str) -> float:
+    """A finite number > 0."""
+    value = _number(text, "the value")
+    if not value > 0:
+        raise argparse.ArgumentTypeError(f"the value must be > 0, got {text}")
+    return value

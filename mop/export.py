@@ -25,12 +25,21 @@ height is padded by one background pixel on the right / bottom.
 
 Interrupting is safe: `close()` (called by the context manager, and at interpreter exit for a
 writer left open) finalises the file, so a render stopped with Ctrl-C leaves a playable file
-with the frames written so far. PNG frames are written to a temporary name and renamed, so
-there is never a truncated frame. GIF frames are kept in memory (one byte per pixel) until
-`close()`; use a video or PNG sequence for long renders.
+with the frames written so far.
+
+Nothing fails silently: OpenCV's encoder does not report a failed write, so a video writer
+checks the free space of its file system every `SPACE_CHECK_FRAMES` frames and, on `close()`,
+reads the finished file back (it opens, and its last frame decodes); a full disk or a file that
+does not read back raises `OSError` naming the file (`errno.ENOSPC` for a full disk).
+
+PNG frames are written to a temporary name and renamed, so there is never a truncated frame;
+a folder that already holds numbered frames is refused (`overwrite=True` removes them first),
+so that two renders never mix. GIF frames are kept in memory (one byte per pixel) until
+`close()`; use a video or PNG sequence for long renders. `os.devnull` drops the frames.
 """
 from __future__ import annotations
 
+import errno
 import os
 import re
 import weakref
@@ -207,9 +216,65 @@ class FrameWriter:
         raise NotImplementedError
 
 
+SPACE_CHECK_FRAMES = 25   # a video writer looks at its disk's free space this often
+
+
+def free_bytes(folder: Path) -> int:
+    """Bytes this process may still write on the file system holding `folder` (root may use
+    the blocks reserved for it)."""
+    stats = os.statvfs(folder)
+    blocks = stats.f_bfree if hasattr(os, "geteuid") and os.geteuid() == 0 else stats.f_bavail
+    return blocks * stats.f_frsize
+
+
+def disk_full_error(path: Path, frames: int) -> OSError:
+    return OSError(errno.ENOSPC, f"no space left on the disk after {frames} frames: the video "
+                                 f"is incomplete; free some space and render again", str(path))
+
+
+def verify_video(path: Path, frames: int) -> None:
+    """Read a finished video back: it opens, has `frames` frames and its last frame decodes.
+    Raises OSError naming the file (ENOSPC when its disk is full)."""
+    import cv2
+
+    path = Path(path)
+    size = path.stat().st_size if path.exists() else 0
+    problem = None
+    if frames == 0:
+        return
+    if size == 0:
+        problem = "the file is empty"
+    else:
+        capture = cv2.VideoCapture(str(path))
+        try:
+            if not capture.isOpened():
+                problem = "it cannot be opened (an unfinished or damaged file)"
+            else:
+                counted = capture.get(cv2.CAP_PROP_FRAME_COUNT)
+                if counted > 0 and abs(counted - frames) > max(1.0, 0.01 * frames):
+                    problem = f"it holds {counted:.0f} frames, {frames} were written"
+                else:
+                    capture.set(cv2.CAP_PROP_POS_FRAMES, frames - 1)
+                    if not capture.read()[0]:
+                        problem = "its last frame does not decode (the file is cut short)"
+        finally:
+            capture.release()
+    if problem is None:
+        return
+    try:
+        full = free_bytes(path.parent) == 0
+    except OSError:
+        full = False
+    if full:
+        raise disk_full_error(path, frames)
+    raise OSError(errno.EIO, f"the finished video does not read back: {problem} ({frames} "
+                             f"frames, {size} bytes)", str(path))
+
+
 class VideoFileWriter(FrameWriter):
     """MP4 (mp4v), MKV (FFV1), AVI (MJPG) or WebM (VP8) through OpenCV; frames composited over
-    the background."""
+    the background. The free space is checked while writing and the file is read back on
+    `close()` (see the module docstring)."""
 
     FOURCC = {".mp4": "mp4v", ".mkv": "FFV1", ".avi": "MJPG", ".webm": "VP80"}
 
@@ -235,6 +300,24 @@ class VideoFileWriter(FrameWriter):
         rgb = over_colour(frame, self.background)
         self._bgr[:height, :width] = rgb[:, :, ::-1]
         self._resource["writer"].write(self._bgr)
+        if (self.frames_written + 1) % SPACE_CHECK_FRAMES == 0 \
+                and free_bytes(self.path.parent) == 0:
+            # the encoder's writes are failing unseen: stop now, the file is finalised as far
+            # as it goes and the error names it
+            self.close(verify=False)
+            raise disk_full_error(self.path, self.frames_written + 1)
+
+    def close(self, *, verify: bool = True) -> None:
+        """Finalise the file and read it back (verify=False skips the reading)."""
+        if self._closed:
+            return
+        super().close()
+        if verify:
+            verify_video(self.path, self.frames_written)
+
+    def __exit__(self, exc_type, *exc) -> None:
+        # on an error already on its way out, finalise without masking it
+        self.close(verify=exc_type is None)
 
     @staticmethod
     def _finish(resource):
@@ -288,10 +371,28 @@ class PngSequenceWriter(FrameWriter):
 
     keeps_alpha = True
 
-    def __init__(self, path: Path, *, fps, size, background, pattern: str):
+    def __init__(self, path: Path, *, fps, size, background, pattern: str,
+                 overwrite: bool = False):
         super().__init__(path, fps=fps, size=size, background=background)
         self.pattern = pattern
+        if path.exists() and not path.is_dir():
+            raise ValueError(f"{path} is a file: PNG frames go into a folder")
         path.mkdir(parents=True, exist_ok=True)
+        # frames of an earlier render would mix with these ones: refuse, or remove them
+        old = self.existing_frames()
+        if old and not overwrite:
+            raise FileExistsError(f"{path} already holds {len(old)} frame(s) named like "
+                                  f"{old[0].name}: remove them or choose another folder, so "
+                                  f"that old and new frames do not mix")
+        for frame in old:
+            frame.unlink()
+
+    def existing_frames(self) -> list[Path]:
+        """Files in the folder that this writer's numbering would produce."""
+        prefix, suffix = re.split(r"%0?\d*d", self.pattern, maxsplit=1)
+        return sorted(p for p in self.path.iterdir()
+                      if p.name.startswith(prefix) and p.name.endswith(suffix)
+                      and p.name[len(prefix):len(p.name) - len(suffix)].isdigit())
 
     def frame_path(self, index: int) -> Path:
         return self.path / (self.pattern % index)
@@ -329,12 +430,29 @@ def _png_target(path: Path) -> tuple[Path, str] | None:
     return None
 
 
-def open_writer(path, *, fps: float, size: tuple[int, int], background=None) -> FrameWriter:
+class NullWriter(FrameWriter):
+    """Frames to os.devnull: rendered, counted and dropped (a timing run)."""
+
+    keeps_alpha = True
+
+    def _write(self, frame):
+        pass
+
+    @staticmethod
+    def _finish(resource):
+        pass
+
+
+def open_writer(path, *, fps: float, size: tuple[int, int], background=None,
+                overwrite: bool = False) -> FrameWriter:
     """Open a frame writer; the format follows the path (see the module docstring).
 
-    path : str | Path; fps : float > 0; size : (width, height) [px] of every frame;
+    path : str | Path (os.devnull drops the frames); fps : float > 0; size : (width, height)
+        [px] of every frame;
     background : "transparent" | "#rrggbb" | "chroma" | (r, g, b) | None (transparent where
         the format keeps alpha, white otherwise).
+    overwrite : a PNG folder that already holds numbered frames is an error (FileExistsError)
+        unless True, when the old frames are removed first.
     """
     path = Path(path)
     fps = float(fps)
@@ -342,6 +460,11 @@ def open_writer(path, *, fps: float, size: tuple[int, int], background=None) -> 
         raise ValueError(f"fps must be > 0, got {fps}")
     size = _check_size(size)
     colour = parse_background(background)
+    if path.exists() and not path.is_dir() and not path.is_file():
+        if os.path.exists(os.devnull) and os.path.samefile(path, os.devnull):
+            return NullWriter(path, fps=fps, size=size, background=colour)
+        raise ValueError(f"{path} is not a regular file or folder (a device or pipe): write "
+                         f"video to a file, or PNG frames to a folder")
     suffix = path.suffix.lower()
     if suffix in VideoFileWriter.FOURCC:
         if colour is None:
@@ -356,7 +479,8 @@ def open_writer(path, *, fps: float, size: tuple[int, int], background=None) -> 
         return GifWriter(path, fps=fps, size=size, background=colour)
     png = _png_target(path)
     if png is not None:
-        return PngSequenceWriter(png[0], fps=fps, size=size, background=colour, pattern=png[1])
+        return PngSequenceWriter(png[0], fps=fps, size=size, background=colour, pattern=png[1],
+                                 overwrite=overwrite)
     if suffix == ".png":
         raise ValueError(f"{path} is a single PNG name: for a PNG sequence give a folder or a "
                          f"numbered name such as {path.stem}_%05d.png or {path.stem}_#####.png")

@@ -10,6 +10,7 @@ takes: how confusable it is with them (`followers.confusability`).
 """
 from __future__ import annotations
 
+import re
 import sys
 from pathlib import Path
 
@@ -60,11 +61,10 @@ def write_motion_preview(motion, path, *, fps: float = PREVIEW_FPS,
     import cv2
     import numpy as np
 
+    from mop.export import open_writer
+
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    codecs = {".mp4": "mp4v", ".avi": "MJPG", ".mkv": "FFV1", ".webm": "VP80"}
-    fourcc = codecs.get(path.suffix.lower())
-    if fourcc is None:
+    if path.suffix.lower() not in (".mp4", ".avi", ".mkv", ".webm"):
         raise ValueError(f"preview video must be .mp4, .avi, .mkv or .webm, got {path}")
     width, height = size
     duration = max(motion.duration, 1.0 / fps)
@@ -94,11 +94,10 @@ def write_motion_preview(motion, path, *, fps: float = PREVIEW_FPS,
         cv2.polylines(background, [points], False, colours[k % len(colours)], 2, cv2.LINE_AA)
         cv2.putText(background, label[:14], (8, int(y0 + lane * 0.6)),
                     cv2.FONT_HERSHEY_SIMPLEX, 0.45, (220, 220, 220), 1, cv2.LINE_AA)
-    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*fourcc), fps, (width, height))
-    if not writer.isOpened():
-        raise OSError(f"OpenCV cannot write {path} with codec {fourcc}")
-    frame = np.empty_like(background)
-    try:
+    # drawn in OpenCV's BGR order; the checked writer takes RGB (and reads the file back)
+    rgb = np.empty_like(background)
+    with open_writer(path, fps=fps, size=(width, height), background="black") as writer:
+        frame = np.empty_like(background)
         for index in range(frames):
             t = min(index / fps, duration)
             np.copyto(frame, background)
@@ -108,9 +107,8 @@ def write_motion_preview(motion, path, *, fps: float = PREVIEW_FPS,
             cv2.rectangle(frame, (8, height - 24), (8 + bar, height - 12), (90, 200, 90), -1)
             cv2.putText(frame, f"{t:5.2f} / {duration:.2f} s", (width - 170, height - 28),
                         cv2.FONT_HERSHEY_SIMPLEX, 0.5, (230, 230, 230), 1, cv2.LINE_AA)
-            writer.write(frame)
-    finally:
-        writer.release()
+            np.copyto(rgb, frame[:, :, ::-1])
+            writer.write(rgb)
     return path
 
 
@@ -211,7 +209,9 @@ def _record(args) -> int:
 
     preview = None
     if (args.preview or "").lower() != "none":
-        preview = Path(args.preview or f"out/preview-{args.action}.mp4")
+        # the action name is free text: only its safe characters make the default file name
+        safe = re.sub(r"[^A-Za-z0-9._-]+", "_", args.action).strip("._-") or "action"
+        preview = Path(args.preview or f"out/preview-{safe}.mp4")
         write_motion_preview(motion, preview)
         print(f"motion preview: {preview} ({duration:.2f} s, {len(motion.channel_names)} "
               f"channels) - play it beside you while recording")

@@ -6,7 +6,19 @@ least every `commit_interval` (default 50 ms). A committed transaction survives 
 process (SIGKILL included: it is in the WAL, in the OS page cache), so a killed recording keeps
 everything but the last commit interval, and the file opens again as an incomplete take.
 `synchronous=NORMAL` trades the last commits on *power loss* for speed; a process crash loses
-nothing that was committed.
+nothing that was committed. The WAL is checkpointed into the main file every
+`checkpoint_interval` (default 1 s), so the `.sqlite` file alone (copied without its `-wal`)
+holds all but the last second of a killed recording.
+
+A WAL belongs to its file: each store has a meta row `store_id` = {"id": random hex, "commit":
+count} that every write transaction updates, so every WAL carries its own store's row. A reader
+that finds a `-wal` beside a file compares the row the main file holds alone with the row seen
+through the WAL: another id (a WAL from another file) or a lower count (an older copy of its own
+WAL) raises `StoreError` instead of silently replacing the take's content. `repair(path)` moves
+such a WAL aside and folds a good one back in (`fold_wal`).
+
+A full disk is `OSError(errno.ENOSPC)` naming the file: when the store is created nothing is
+left behind; while recording, the frames committed before the fault stay in the file.
 
 Schema (version 1)::
 
@@ -27,6 +39,7 @@ on it and the replay source reads it.
 from __future__ import annotations
 
 import datetime as _dt
+import errno
 import json
 import logging
 import math
@@ -34,6 +47,7 @@ import os
 import sqlite3
 import threading
 import time
+import uuid
 from collections import deque
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -113,6 +127,20 @@ def _json(value: Any, what: str) -> str:
         raise TypeError(f"{what} must be JSON-serialisable (no NaN, no arrays): {error}") from None
 
 
+def _is_disk_full(error: BaseException) -> bool:
+    if isinstance(error, OSError):
+        return error.errno in (errno.ENOSPC, errno.EDQUOT)
+    return isinstance(error, sqlite3.Error) and (
+        getattr(error, "sqlite_errorcode", None) == 13 or "disk is full" in str(error))
+
+
+def _storage_error(error: BaseException, path: Path, what: str) -> OSError:
+    """An OSError naming the file for a failed write: ENOSPC for a full disk."""
+    if _is_disk_full(error):
+        return OSError(errno.ENOSPC, f"no space left on the disk: {what}", str(path))
+    return OSError(errno.EIO, f"{what} ({type(error).__name__}: {error})", str(path))
+
+
 # ------------------------------------------------------------------------------------------
 # writing
 
@@ -142,11 +170,14 @@ class StoreWriter:
         1.5 commit intervals, the append commits in the appending thread (backpressure: a
         producer faster than the disk is slowed to the disk's pace instead of piling up frames
         a crash would lose).
+    checkpoint_interval : [s] between WAL checkpoints into the main file (what a copy of the
+        `.sqlite` alone holds of a killed recording).
     """
 
     def __init__(self, path: str | os.PathLike, *, metadata: Mapping | None = None,
                  commit_interval: float = 0.05, overwrite: bool = False,
-                 max_pending: int = 5000, created: str | None = None):
+                 max_pending: int = 5000, created: str | None = None,
+                 checkpoint_interval: float = 1.0):
         if not 0 < commit_interval <= 0.1:
             raise ValueError(f"commit_interval must be in (0, 0.1] s so that a crash loses at "
                              f"most 100 ms, got {commit_interval!r}")
@@ -160,9 +191,12 @@ class StoreWriter:
         self.commit_interval = float(commit_interval)
         if max_pending < 1:
             raise ValueError(f"max_pending must be >= 1, got {max_pending}")
+        if not checkpoint_interval > 0:
+            raise ValueError(f"checkpoint_interval must be > 0 s, got {checkpoint_interval!r}")
+        self.checkpoint_interval = float(checkpoint_interval)
         self.max_pending = int(max_pending)
+        self.store_id = uuid.uuid4().hex
         self.stats = WriterStats()
-        self._db = sqlite3.connect(str(self.path), check_same_thread=False, isolation_level=None)
         self._db_lock = threading.Lock()
         # appends go to a deque without the commit thread's lock: a lock shared by a tight
         # append loop and the committer starves the committer (Python locks are not fair)
@@ -175,25 +209,64 @@ class StoreWriter:
         self._last_commit = time.monotonic()
         self._error: BaseException | None = None
         self._closed = False
+        self._last_checkpoint = time.monotonic()
+        self._commit_count = 0
+        meta = {"format": FORMAT, "schema_version": SCHEMA_VERSION,
+                "store_id": {"id": self.store_id, "commit": 0},
+                "created": str(created) if created else _now_iso(),
+                "complete": False, "metadata": dict(metadata or {})}
+        rows = [(k, _json(v, f"metadata {k!r}")) for k, v in meta.items()]
+        try:
+            self._db = sqlite3.connect(str(self.path), check_same_thread=False,
+                                       isolation_level=None)
+            self._create(rows)
+        except (sqlite3.Error, OSError) as error:
+            # nothing half-made stays behind as a take
+            db = getattr(self, "_db", None)
+            if db is not None:
+                db.close()
+            remove_store_file(self.path)
+            raise _storage_error(error, self.path, "the take store could not be created, "
+                                                   "nothing was written") from None
+        self._stop = threading.Event()
+        self._flusher = threading.Thread(target=self._flush_loop, name="mop-store-commit",
+                                         daemon=True)
+        self._flusher.start()
+
+    def _create(self, rows) -> None:
         db = self._db
         db.execute("PRAGMA journal_mode=WAL")
         db.execute("PRAGMA synchronous=NORMAL")
         db.execute(f"PRAGMA application_id={APPLICATION_ID}")
         db.execute(f"PRAGMA user_version={SCHEMA_VERSION}")
         db.execute("BEGIN")
-        for statement in _SCHEMA.strip().split(";"):
-            if statement.strip():
-                db.execute(statement)
-        meta = {"format": FORMAT, "schema_version": SCHEMA_VERSION,
-                "created": str(created) if created else _now_iso(),
-                "complete": False, "metadata": dict(metadata or {})}
-        db.executemany("INSERT INTO meta(key, value) VALUES (?, ?)",
-                       [(k, _json(v, f"metadata {k!r}")) for k, v in meta.items()])
-        db.execute("COMMIT")
-        self._stop = threading.Event()
-        self._flusher = threading.Thread(target=self._flush_loop, name="mop-store-commit",
-                                         daemon=True)
-        self._flusher.start()
+        try:
+            for statement in _SCHEMA.strip().split(";"):
+                if statement.strip():
+                    db.execute(statement)
+            db.executemany("INSERT INTO meta(key, value) VALUES (?, ?)", rows)
+            db.execute("COMMIT")
+        except BaseException:
+            if db.in_transaction:
+                db.execute("ROLLBACK")
+            raise
+        # the main file holds the schema and the id from the start (a copy without the WAL
+        # is a take, not "tables: none")
+        self._checkpoint(strict=True)
+
+    def _checkpoint(self, *, strict: bool = False) -> None:
+        """Copy the WAL's committed pages into the main file (PASSIVE: never waits)."""
+        try:
+            busy, _, _ = self._db.execute("PRAGMA wal_checkpoint(PASSIVE)").fetchone()
+        except sqlite3.Error as error:
+            if strict:
+                raise
+            # the WAL keeps everything: a checkpoint that fails loses nothing
+            log.info("take store %s: checkpoint failed: %s", self.path, error)
+            return
+        if busy and strict:
+            log.info("take store %s: checkpoint blocked by a reader", self.path)
+        self._last_checkpoint = time.monotonic()
 
     # -- structure --------------------------------------------------------------------------
     def add_stream(self, name: str, channels: Sequence[str], *, rate: float = 0.0,
@@ -207,11 +280,11 @@ class StoreWriter:
         channels = [str(c) for c in channels]
         if not channels:
             raise ValueError(f"stream {name!r} needs at least one channel")
-        with self._db_lock:
-            cursor = self._db.execute(
-                "INSERT INTO streams(name, channels, rate, metadata) VALUES (?, ?, ?, ?)",
-                (name, _json(channels, "channels"), float(rate),
-                 _json(dict(metadata or {}), f"stream {name!r} metadata")))
+        cursor = self._execute(
+            "INSERT INTO streams(name, channels, rate, metadata) VALUES (?, ?, ?, ?)",
+            (name, _json(channels, "channels"), float(rate),
+             _json(dict(metadata or {}), f"stream {name!r} metadata")),
+            f"stream {name!r} could not be added")
         stream_id = int(cursor.lastrowid)
         self._streams[name] = (stream_id, len(channels))
         self._next_seq[stream_id] = 0
@@ -225,15 +298,42 @@ class StoreWriter:
         """Store a JSON-serialisable object under `name` (committed at once)."""
         self._check_open()
         text = _json(content, f"attachment {name!r}")
-        with self._db_lock:
-            self._db.execute("INSERT OR REPLACE INTO attachments(name, content) VALUES (?, ?)",
-                             (str(name), text))
+        self._execute("INSERT OR REPLACE INTO attachments(name, content) VALUES (?, ?)",
+                      (str(name), text), f"attachment {name!r} could not be stored")
 
     def _meta(self, key: str, value: Any) -> None:
         self._check_open()
         text = _json(value, f"metadata {key!r}")
+        self._execute("INSERT OR REPLACE INTO meta(key, value) VALUES (?, ?)", (key, text),
+                      f"metadata {key!r} could not be stored")
+
+    def _stamp(self) -> None:
+        """Inside a transaction: mark it with this store's id and a commit count (what tells a
+        WAL's owner and age)."""
+        self._commit_count += 1
+        self._db.execute("UPDATE meta SET value=? WHERE key='store_id'",
+                         (_json({"id": self.store_id, "commit": self._commit_count}, "id"),))
+
+    def _execute(self, statement: str, parameters: tuple, what: str):
         with self._db_lock:
-            self._db.execute("INSERT OR REPLACE INTO meta(key, value) VALUES (?, ?)", (key, text))
+            try:
+                self._db.execute("BEGIN")
+                cursor = self._db.execute(statement, parameters)
+                self._stamp()
+                self._db.execute("COMMIT")
+                return cursor
+            except sqlite3.Error as error:
+                if self._db.in_transaction:
+                    try:
+                        self._db.execute("ROLLBACK")
+                    except sqlite3.Error:
+                        pass
+                if _is_disk_full(error):
+                    self._error = _storage_error(
+                        error, self.path, f"{what}; the {self.stats.frames} frames committed "
+                                          f"before are kept")
+                    raise self._error from error
+                raise
 
     # -- frames -----------------------------------------------------------------------------
     def append(self, stream: str, t: float, values) -> None:
@@ -303,13 +403,23 @@ class StoreWriter:
             since = time.monotonic()
         started = time.monotonic()
         with self._db_lock:
-            self._db.execute("BEGIN")
             try:
+                self._db.execute("BEGIN")
                 self._db.executemany(
                     "INSERT INTO frames(stream, seq, t, data) VALUES (?, ?, ?, ?)", rows)
+                self._stamp()
                 self._db.execute("COMMIT")
-            except BaseException:
-                self._db.execute("ROLLBACK")
+            except BaseException as error:
+                # a failed COMMIT may have ended the transaction already
+                if self._db.in_transaction:
+                    try:
+                        self._db.execute("ROLLBACK")
+                    except sqlite3.Error:
+                        pass
+                if isinstance(error, (sqlite3.Error, OSError)):
+                    raise _storage_error(
+                        error, self.path, f"a commit of {len(rows)} frames failed; the "
+                        f"{self.stats.frames} frames committed before are kept") from error
                 raise
         done = time.monotonic()
         stats = self.stats
@@ -328,9 +438,12 @@ class StoreWriter:
             try:
                 self.flush()
             except BaseException as error:   # disk full, file removed: report on next call
-                log.error("take store %s: commit failed: %s", self.path, error)
+                log.info("take store %s: commit failed: %s", self.path, error)
                 self._error = error
                 return
+            if time.monotonic() - self._last_checkpoint >= self.checkpoint_interval:
+                with self._db_lock:
+                    self._checkpoint()
 
     # -- end --------------------------------------------------------------------------------
     def close(self, *, complete: bool = True) -> None:
@@ -341,24 +454,34 @@ class StoreWriter:
         self._stop.set()
         self._flusher.join()
         try:
-            self.flush()
-            if complete:
-                self._meta("complete", True)
+            if self._error is None:
+                try:
+                    self.flush()
+                    if complete:
+                        self._meta("complete", True)
+                except (sqlite3.Error, OSError) as error:
+                    self._error = error
         finally:
             self._closed = True
             with self._db_lock:
                 try:
                     self._db.execute("PRAGMA wal_checkpoint(TRUNCATE)")
                     self._db.execute("PRAGMA journal_mode=DELETE")
-                except sqlite3.OperationalError as error:
-                    # another connection is reading: the file stays in WAL mode, which is
-                    # just as readable; the WAL is folded in when the last reader closes
+                except sqlite3.Error as error:
+                    # another connection is reading, or the disk is full: the file stays in
+                    # WAL mode, just as readable; the WAL is folded in later (fold_wal)
                     log.info("take store %s: left in WAL mode (%s)", self.path, error)
                 finally:
                     self._db.close()
         if self._error is not None:
-            raise OSError(f"take store {self.path}: a background commit failed: "
-                          f"{self._error}") from self._error
+            raise self._failure() from self._error
+
+    def _failure(self) -> OSError:
+        error = self._error
+        if isinstance(error, OSError) and error.filename is not None:
+            return error
+        return _storage_error(error, self.path, f"a commit failed; the {self.stats.frames} "
+                                                f"frames committed before are kept")
 
     def __enter__(self) -> "StoreWriter":
         return self
@@ -378,8 +501,7 @@ class StoreWriter:
         if self._closed:
             raise ValueError(f"take store {self.path} is closed")
         if self._error is not None:
-            raise OSError(f"take store {self.path}: a background commit failed: "
-                          f"{self._error}") from self._error
+            raise self._failure() from self._error
 
 
 def remove_store_file(path: str | os.PathLike) -> None:
@@ -402,7 +524,7 @@ def _describe_start(path: Path) -> str:
     return repr(head[:16]) if head else "an empty file"
 
 
-def _open_readonly(path: Path) -> sqlite3.Connection:
+def _open_readonly(path: Path, *, check_wal: bool = True) -> sqlite3.Connection:
     if not path.exists():
         raise FileNotFoundError(f"take store not found: {path}")
     if path.is_dir():
@@ -412,9 +534,167 @@ def _open_readonly(path: Path) -> sqlite3.Connection:
     if head != _SQLITE_MAGIC:
         raise StoreError(f"{path} is not a mop take store: not an SQLite file (it starts with "
                          f"{_describe_start(path)})", path=path)
+    wal = _wal_path(path)
+    if check_wal and wal.is_file() and wal.stat().st_size > 0:
+        check_wal_belongs(path)
     # mode=ro still replays a WAL left by a killed writer (SQLite creates the -shm if needed)
     uri = f"file:{quote(str(path.resolve()))}?mode=ro"
     return sqlite3.connect(uri, uri=True, check_same_thread=False)
+
+
+def _wal_path(path: Path) -> Path:
+    return Path(f"{path}-wal")
+
+
+def _main_file_alone(path: Path) -> sqlite3.Connection | None:
+    """The store as its main file holds it without the WAL (an in-memory copy), or None."""
+    data = bytearray(path.read_bytes())
+    if len(data) < 512 or data[:16] != _SQLITE_MAGIC:
+        return None
+    data[18] = data[19] = 1        # read as a rollback-journal file: the WAL is not looked at
+    db = sqlite3.connect(":memory:")
+    try:
+        db.deserialize(bytes(data))
+        return db
+    except sqlite3.Error:
+        db.close()
+        return None
+
+
+def _identity(db: sqlite3.Connection) -> tuple[str, int] | None:
+    """(store id, commit count); stores written before ids: (creation time, 0)."""
+    try:
+        meta = {key: json.loads(value) for key, value in db.execute(
+            "SELECT key, value FROM meta WHERE key IN ('store_id', 'created')")}
+    except (sqlite3.Error, json.JSONDecodeError):
+        return None
+    stamp = meta.get("store_id")
+    if isinstance(stamp, dict) and isinstance(stamp.get("id"), str) \
+            and isinstance(stamp.get("commit"), int):
+        return stamp["id"], stamp["commit"]
+    created = meta.get("created")
+    return (str(created), 0) if created else None
+
+
+def check_wal_belongs(path: str | os.PathLike) -> None:
+    """Raise StoreError when the `-wal` beside `path` is not its own: it came from another store
+    file (another id), or is an older copy of its own (it would take frames away). A file whose
+    main part holds no readable identity (killed before its first checkpoint) is trusted."""
+    path = Path(path)
+    wal = _wal_path(path)
+    alone_db = _main_file_alone(path)
+    if alone_db is None:
+        return
+    try:
+        alone = _identity(alone_db)
+    finally:
+        alone_db.close()
+    if alone is None:
+        return
+    uri = f"file:{quote(str(path.resolve()))}?mode=ro"
+    try:
+        db = sqlite3.connect(uri, uri=True)
+        try:
+            through = _identity(db)
+        finally:
+            db.close()
+    except sqlite3.Error:
+        through = None
+    hint = "it was not applied; `mop takes repair` (or capture.store.repair) moves it aside"
+    if through is None or through[0] != alone[0]:
+        raise StoreError(f"{wal} does not belong to {path}: it holds another take store's "
+                         f"pages (store {through[0] if through else 'unreadable'}, the file is "
+                         f"{alone[0]}); {hint}", path=path)
+    if through[1] < alone[1]:
+        raise StoreError(f"{wal} is older than {path} itself (commit {through[1]}, the file "
+                         f"holds {alone[1]}): applying it would take recorded frames away; "
+                         f"{hint}", path=path)
+
+
+def fold_wal(path: str | os.PathLike) -> bool:
+    """Fold a `-wal` left by a killed recording back into its file, so that the file alone is
+    the whole take. Returns True when it did; False when there was nothing to fold or the file
+    is busy (still being recorded) or cannot be written. A WAL that does not belong raises
+    StoreError (see `check_wal_belongs`)."""
+    path = Path(path)
+    wal = _wal_path(path)
+    if not wal.is_file():
+        with open(path, "rb") as handle:
+            header = handle.read(20)
+        if len(header) < 20 or header[18] != 2:
+            return False    # not in WAL mode: nothing to fold
+    elif wal.stat().st_size > 0:
+        check_wal_belongs(path)
+    try:
+        db = sqlite3.connect(str(path), timeout=0.2, isolation_level=None)
+    except sqlite3.Error:
+        return False
+    try:
+        # switching out of WAL mode needs the file to ourselves: a live recording keeps it
+        mode = db.execute("PRAGMA journal_mode=DELETE").fetchone()[0]
+        return str(mode).lower() == "delete"
+    except sqlite3.Error as error:
+        log.info("take store %s: WAL not folded (%s)", path, error)
+        return False
+    finally:
+        db.close()
+
+
+def repair(path: str | os.PathLike) -> list[str]:
+    """Make a store file whole again; returns what was done, one line each (empty: healthy).
+
+    A `-wal` that belongs is folded in; one that does not (or is stale) is moved aside as
+    `<file>-wal.foreign` (never deleted). A damaged file is salvaged: the damaged original is
+    kept as `<file>.damaged` and what could be read is written in its place."""
+    path = Path(path)
+    done: list[str] = []
+    wal = _wal_path(path)
+    if wal.is_file():
+        try:
+            if fold_wal(path):
+                done.append("folded the WAL of an interrupted recording back into the file")
+        except StoreError as error:
+            aside = _free_name(Path(f"{wal}.foreign"))
+            os.replace(wal, aside)
+            shm = Path(f"{path}-shm")
+            if shm.exists():
+                shm.unlink()
+            fold_wal(path)      # the file alone, out of WAL mode
+            reason = str(error).split("; it was not applied")[0]
+            done.append(f"moved the WAL aside to {aside.name}: {reason}")
+    try:
+        read_store(path)
+    except StoreError as error:
+        salvaged = error.salvaged
+        if salvaged is None:
+            raise
+        kept = _free_name(Path(f"{path}.damaged"))
+        os.replace(path, kept)
+        write_contents(path, salvaged)
+        done.append(f"salvaged {_salvage_summary(salvaged)} into a new file; the damaged "
+                    f"original is kept as {kept.name}")
+    return done
+
+
+def _free_name(path: Path) -> Path:
+    candidate, number = path, 1
+    while candidate.exists():
+        number += 1
+        candidate = path.with_name(f"{path.name}.{number}")
+    return candidate
+
+
+def write_contents(path: str | os.PathLike, contents: StoreContents) -> None:
+    """Write a whole StoreContents (e.g. a salvaged one) as a new store file. A contents that
+    was not complete stays marked interrupted."""
+    with StoreWriter(path, metadata=contents.metadata, created=contents.created or None) as w:
+        for name, content in contents.attachments.items():
+            w.put_attachment(name, content)
+        for name, stream in contents.streams.items():
+            w.add_stream(name, stream.channels, rate=stream.rate, metadata=stream.metadata)
+            w.append_many(name, stream.times, stream.values)
+        if not contents.complete:
+            w.close(complete=False)
 
 
 def _tables(db: sqlite3.Connection) -> list[str]:

@@ -34,8 +34,9 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 from capture.resample import align_durations
-from capture.store import (SUFFIX, StoreContents, StoreError, StoreWriter, read_info, read_store,
-                           remove_store_file)
+from capture.store import (SUFFIX, StoreContents, StoreError, StoreWriter, fold_wal, read_info,
+                           read_store, remove_store_file)
+from capture.store import repair as repair_store
 
 KIND = "mop.take"
 VERSION = 1
@@ -321,8 +322,17 @@ class TakeRecorder:
         return self.name
 
     def abort(self) -> None:
-        """Close without marking the take complete (it stays readable as interrupted)."""
-        self.writer.close(complete=False)
+        """Close without marking the take complete (it stays readable as interrupted). A write
+        failure that caused the abort was raised already: closing does not raise it again."""
+        try:
+            self.writer.close(complete=False)
+        except OSError:
+            pass
+
+    @property
+    def frames_kept(self) -> int:
+        """Frames committed to the file (what a crash or a full disk cannot take away)."""
+        return self.writer.stats.frames
 
     def discard(self) -> None:
         """Close and delete the file."""
@@ -386,6 +396,7 @@ class TakeStore:
         infos = []
         for name in self.names():
             try:
+                self.fold(name)
                 info = read_info(self.file(name))
             except (StoreError, OSError) as error:
                 infos.append(TakeInfo(name, "?", "?", 0.0, 0, (), False, "", str(error)))
@@ -397,7 +408,8 @@ class TakeStore:
                 continue
             stream = info["streams"].get(ACTION_STREAM, {})
             duration = meta.get("motion_duration")
-            if not isinstance(duration, (int, float)):
+            if not isinstance(duration, (int, float)) or not info["complete"]:
+                # an interrupted take is as long as what it holds, not as what was planned
                 start, end = stream.get("start"), stream.get("end")
                 duration = (end - start) if start is not None and end is not None else 0.0
             entry = TakeInfo(name, str(meta.get("performer", "?")), str(meta.get("action", "?")),
@@ -417,6 +429,7 @@ class TakeStore:
         if not path.is_file():
             raise KeyError(f"no take {name!r} in {self.path}")
         try:
+            self.fold(name)
             contents = read_store(path)
         except StoreError as error:
             salvaged = None
@@ -433,6 +446,19 @@ class TakeStore:
                 f"load({name!r}, salvage=True) or `mop takes show {name} --salvage`")
             raise TakeError(f"take {name!r}: {error}{hint}", salvaged=salvaged) from None
         return _take_from_contents(contents, name)
+
+    def fold(self, name: str) -> bool:
+        """Fold the WAL a killed recording left beside take `name` back into its file (True
+        when it did; False when there was none, or it is being recorded, or the folder is
+        read-only). A WAL that belongs to another file raises StoreError."""
+        return fold_wal(self.file(name))
+
+    def repair(self, name: str) -> list[str]:
+        """Make take `name`'s file whole (`capture.store.repair`): what was done, a line each."""
+        path = self.file(name)
+        if not path.is_file():
+            raise KeyError(f"no take {name!r} in {self.path}")
+        return repair_store(path)
 
     # -- writing ----------------------------------------------------------------------------
     def record(self, *, performer: str, action: str, channels: Sequence[str] | None = None,
@@ -485,19 +511,33 @@ class TakeStore:
 
     # -- export -----------------------------------------------------------------------------
     def export(self, name: str, destination: str | os.PathLike, *, format: str | None = None,
-               salvage: bool = False) -> list[Path]:
+               salvage: bool = False, overwrite: bool = False) -> list[Path]:
         """Write the take as .npz or CSV; returns the files written.
 
         npz: action_times (N,), action_values (N, D), action_channels (D,) str, aligned_times
         (T,), aligned_action (T, D), motion_columns (C,) str, motion_values (T, C), and
         metadata_json (a JSON string); further streams as stream_<name>_times/_values/_channels.
         csv: <destination> with t and the raw action channels, and <stem>.aligned.csv with the
-        aligned action next to the motion (t, action channels, motion columns)."""
+        aligned action next to the motion (t, action channels, motion columns). A folder as
+        destination (an existing one, or a path ending in '/') gets <folder>/<name>.<format>.
+        Existing files are an error (FileExistsError) unless overwrite=True."""
         destination = Path(destination)
-        format = (format or destination.suffix.lstrip(".")).lower()
+        folder = destination.is_dir() or str(destination).endswith(("/", os.sep))
+        format = (format or ("" if folder else destination.suffix.lstrip(".")) or "npz").lower()
         if format not in ("npz", "csv"):
             raise ValueError(f"export format must be 'npz' or 'csv', got {format!r} (from "
                              f"{destination})")
+        if folder:
+            destination = destination / f"{check_name(name)}.{format}"
+        suffix = f".{format}"
+        first = destination if destination.suffix == suffix else \
+            destination.with_name(destination.name + suffix)
+        targets = [first] if format == "npz" else [first,
+                                                   first.with_name(first.stem + ".aligned.csv")]
+        existing = [str(t) for t in targets if t.exists()]
+        if existing and not overwrite:
+            raise FileExistsError(f"{', '.join(existing)} already exist(s): choose another "
+                                  f"--out, or pass --force to replace")
         take = self.load(name, salvage=salvage)
         aligned_times, aligned = (take.aligned() if take.times.size >= 2
                                   else (np.zeros(0), np.zeros((0, len(take.channels)))))

@@ -41,30 +41,42 @@ def mop_env() -> dict:
 
 
 def run_on_small_disk(argv: list[str], *, disk: Path, size_kb: int, keep: Path | None = None,
-                      fill_when_exists: str | None = None,
+                      fill_when_exists: str | None = None, prefill: bool = False,
+                      snapshot: Path | None = None, setup: str = "",
                       cwd: Path | None = None, timeout: float = 300) -> subprocess.CompletedProcess:
     """Run `python -m mop ARGV` with a fresh tmpfs of `size_kb` KB mounted on `disk` (visible to
-    that process only). `fill_when_exists`: a path under `disk`; once it exists (and has grown
-    for a moment) the rest of the disk is filled with zeros while mop runs, so the fault comes
-    mid-work. Afterwards the disk's files are copied to `keep` (the tmpfs vanishes with the
-    namespace)."""
+    that process only). `setup`: shell lines run once the disk is mounted. `prefill`: the disk
+    is full before mop starts. `fill_when_exists`: a path under `disk`; once it exists and mop
+    has printed "GO" (and a second later) the disk's files are copied to `snapshot` (what was there just before
+    the fault) and the rest of the disk is filled with zeros while mop runs, so the fault comes
+    mid-work. Afterwards the filler is removed and the disk's files are copied to `keep` (the
+    tmpfs vanishes with the namespace)."""
     prefix = small_disk_prefix()
     if prefix is None:
         raise RuntimeError("no private mount namespace available")
     disk.mkdir(parents=True, exist_ok=True)
     mop = " ".join(shlex.quote(a) for a in [sys.executable, "-m", "mop", *argv])
     quoted = shlex.quote(str(disk))
-    lines = [f"mount -t tmpfs -o size={int(size_kb)}k tmpfs {quoted} || exit 97"]
+    fill = f"dd if=/dev/zero of={quoted}/filler bs=4k 2>/dev/null; sync"
+    lines = [f"mount -t tmpfs -o size={int(size_kb)}k tmpfs {quoted} || exit 97", setup]
+    if prefill:
+        lines += [fill]
     if fill_when_exists:
+        # mop's output goes through a file so that the fill can wait for its word that the
+        # work is under way ("GO" for a recording), then a moment more
         target = shlex.quote(fill_when_exists)
-        lines += [f"{mop} & pid=$!",
-                  f"for i in $(seq 1 600); do [ -s {target} ] && break; sleep 0.05; done",
-                  "sleep 0.5",
-                  f"dd if=/dev/zero of={quoted}/filler bs=4k 2>/dev/null; sync",
-                  "wait $pid; rc=$?",
-                  f"rm -f {quoted}/filler"]
+        log = shlex.quote(str(disk.parent / "mop-output.txt"))
+        lines += [f"{mop} > {log} & pid=$!",
+                  f"for i in $(seq 1 1200); do [ -s {target} ] && grep -q 'GO' {log} && break;"
+                  f" sleep 0.05; done",
+                  "sleep 1"]
+        if snapshot is not None:
+            snapshot.mkdir(parents=True, exist_ok=True)
+            lines += [f"cp -a {quoted}/. {shlex.quote(str(snapshot))}/"]
+        lines += [fill, "wait $pid; rc=$?", f"cat {log}"]
     else:
         lines += [f"{mop}; rc=$?"]
+    lines += [f"rm -f {quoted}/filler"]
     if keep is not None:
         keep.mkdir(parents=True, exist_ok=True)
         lines += [f"cp -a {quoted}/. {shlex.quote(str(keep))}/ 2>/dev/null"]

@@ -73,3 +73,21 @@ def test_send_that_sends_nothing_is_an_error(tmp_path, capsys):
                  "--quiet"])
     assert code == 1
     assert "gave no frame" in capsys.readouterr().err
+
+
+def test_takes_export_never_overwrites_without_force_and_writes_into_a_folder(tmp_path,
+                                                                              capsys):
+    import shutil
+    folder = tmp_path / "takes"
+    folder.mkdir()
+    shutil.copy(TAKES / "glove_chomp.sqlite", folder / "chomp.sqlite")
+    out = tmp_path / "exports"
+    out.mkdir()
+    base = ["takes", "--recordings", str(folder), "export", "chomp"]
+    assert main([*base, "--out", str(out)]) == 0
+    assert sorted(p.name for p in out.iterdir()) == ["chomp.npz"]
+    assert main([*base, "--out", str(out)]) == 1
+    assert "already exist" in capsys.readouterr().err
+    assert main([*base, "--out", str(out), "--force"]) == 0
+    assert main([*base, "--out", str(out / "csv") + "/", "--format", "csv"]) == 0
+    assert sorted(p.name for p in (out / "csv").iterdir()) == ["chomp.aligned.csv", "chomp.csv"]

@@ -8,11 +8,13 @@ and why that is a real ENOSPC); where no namespace can be had the disk tests ski
 """
 from __future__ import annotations
 
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
 
-from faults import ROOT, run_on_small_disk, small_disk_prefix
+from faults import ROOT, mop_env, run_on_small_disk, small_disk_prefix
 
 DATA = ROOT / "characters" / "assets"
 TAKES = ROOT / "recordings" / "demo"
@@ -105,3 +107,128 @@ def test_a_full_disk_for_the_record_preview_is_an_error(tmp_path):
     assert result.returncode == 1, (result.stdout, result.stderr)
     _one_error_line(result.stderr, str(preview), "no space left")
     assert not list((tmp_path / "takes").glob("*.sqlite"))
+
+
+def _record_argv(folder: Path, *, name="t1", preview="none", source=None) -> list[str]:
+    return ["record", "--performer", "ann", "--action", "wave", "--motion",
+            str(DATA / "momo_wave.json"), "--source",
+            source or "replay:" + str(TAKES / "glove_show"), "--recordings", str(folder),
+            "--name", name, "--countdown", "0", "--preview", preview]
+
+
+def _frames(folder: Path, name: str):
+    from mop.takes import TakeStore
+    take = TakeStore(folder, create=False).load(name)
+    return take
+
+
+@needs_small_disk
+def test_a_full_disk_when_record_starts_leaves_no_take(tmp_path):
+    disk = tmp_path / "disk"
+    keep = tmp_path / "keep"
+    result = run_on_small_disk(_record_argv(disk / "takes"), disk=disk, size_kb=64, keep=keep,
+                               setup=f"mkdir -p {disk}/takes", prefill=True)
+    assert result.returncode == 1, (result.stdout, result.stderr)
+    _one_error_line(result.stderr, "mop record: error", str(disk / "takes" / "t1.sqlite"),
+                    "no space left", "nothing was written")
+    assert "Traceback" not in result.stderr
+    assert sorted(p.name for p in (keep / "takes").iterdir()) == []
+
+
+@needs_small_disk
+def test_a_full_disk_while_recording_keeps_what_was_recorded_before(tmp_path):
+    disk = tmp_path / "disk"
+    keep, before = tmp_path / "keep", tmp_path / "before"
+    take = disk / "takes" / "t1.sqlite"
+    result = run_on_small_disk(_record_argv(disk / "takes"), disk=disk, size_kb=1024, keep=keep,
+                               fill_when_exists=str(take), snapshot=before)
+    assert result.returncode == 1, (result.stdout, result.stderr)
+    line = _one_error_line(result.stderr, "mop record: error", str(take), "no space left",
+                           "recorded before are kept as take t1")
+    assert "rollback" not in result.stderr
+    saved = _frames(before / "takes", "t1")
+    kept = _frames(keep / "takes", "t1")
+    assert not kept.complete
+    assert f"the {kept.times.size} frames" in line
+    # nothing recorded before the fault is lost, and what is kept is what was recorded
+    assert saved.times.size >= 10
+    assert kept.times.size >= saved.times.size
+    assert (kept.values[:saved.times.size] == saved.values).all()
+    assert kept.times.size < 200                     # the take stopped at the fault
+
+
+def _kill_recording_midway(folder: Path, name: str, seconds: float) -> int:
+    """Start `mop record` (a 4 s take from a replayed glove), SIGKILL it `seconds` into the
+    take; returns its exit status."""
+    import os
+    import signal
+    import time
+
+    process = subprocess.Popen([sys.executable, "-m", "mop", *_record_argv(folder, name=name)],
+                               env=mop_env(), cwd=ROOT, stdout=subprocess.DEVNULL,
+                               stderr=subprocess.DEVNULL)
+    take = folder / f"{name}.sqlite"
+    deadline = time.monotonic() + 60
+    while not take.exists() and time.monotonic() < deadline and process.poll() is None:
+        time.sleep(0.02)
+    time.sleep(seconds)
+    os.kill(process.pid, signal.SIGKILL)
+    return process.wait()
+
+
+def test_kill_9_then_copying_only_the_sqlite_keeps_all_but_the_last_second(tmp_path):
+    import shutil
+
+    folder, copy = tmp_path / "takes", tmp_path / "copy"
+    assert _kill_recording_midway(folder, "t1", 2.6) == -9
+    assert (folder / "t1.sqlite-wal").exists()      # the last moments live in the WAL
+    copy.mkdir()
+    shutil.copy(folder / "t1.sqlite", copy / "t1.sqlite")
+    alone = _frames(copy, "t1")
+    # listing folds the WAL back: the file alone is then the whole take
+    listing = subprocess.run([sys.executable, "-m", "mop", "takes", "--recordings", str(folder),
+                              "list"], env=mop_env(), capture_output=True, text=True)
+    assert listing.returncode == 0, listing.stderr
+    assert "(interrupted)" in listing.stdout
+    assert not (folder / "t1.sqlite-wal").exists()
+    whole = _frames(folder, "t1")
+    assert not alone.complete and not whole.complete
+    # about 2.6 s at 50 Hz were recorded; the copy lacks at most the last checkpoint interval
+    assert whole.times.size >= 100
+    assert alone.times.size >= whole.times.size - 50 - 5
+    assert (alone.values == whole.values[:alone.times.size]).all()
+    show = subprocess.run([sys.executable, "-m", "mop", "takes", "--recordings", str(copy),
+                           "show", "t1"], env=mop_env(), capture_output=True, text=True)
+    assert show.returncode == 0, show.stderr
+    assert f"{alone.times.size} frames" in show.stdout
+    assert "captured of the planned 4.00 s" in show.stdout
+
+
+def test_a_stale_wal_beside_another_take_is_detected_and_moved_aside(tmp_path):
+    import shutil
+
+    killed, folder = tmp_path / "killed", tmp_path / "takes"
+    assert _kill_recording_midway(killed, "k", 1.5) == -9
+    folder.mkdir()
+    shutil.copy(TAKES / "glove_chomp.sqlite", folder / "chomp.sqlite")
+    original = _frames(folder, "chomp")
+    shutil.copy(killed / "k.sqlite-wal", folder / "chomp.sqlite-wal")
+
+    def mop_takes(*argv):
+        return subprocess.run([sys.executable, "-m", "mop", "takes", "--recordings",
+                               str(folder), *argv], env=mop_env(), capture_output=True,
+                              text=True)
+
+    show = mop_takes("show", "chomp")
+    assert show.returncode == 1
+    _one_error_line(show.stderr, "chomp.sqlite-wal does not belong to", "takes repair")
+    listing = mop_takes("list")
+    assert listing.returncode == 0 and "DAMAGED" in listing.stdout
+    repaired = mop_takes("repair", "chomp")
+    assert repaired.returncode == 0, repaired.stderr
+    assert "moved the WAL aside to chomp.sqlite-wal.foreign" in repaired.stdout
+    assert (folder / "chomp.sqlite-wal.foreign").exists()       # moved, never deleted
+    after = _frames(folder, "chomp")
+    assert after.complete
+    assert (after.values == original.values).all() and (after.times == original.times).all()
+    assert mop_takes("repair").stdout.strip() == "chomp: healthy: nothing to do"

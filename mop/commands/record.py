@@ -181,14 +181,26 @@ def _progress(action: str, duration: float):
 
 
 def run(args) -> int:
-    try:
-        return _record(args)
-    except OSError as error:
-        if isinstance(error, FileNotFoundError):
-            raise
-        # a device that is not there or went silent: one clear line, like bad input
-        print(f"mop record: error: {error}", file=sys.stderr)
-        return 1
+    # errors (a device that is not there or went silent, a full disk) are one line from mop.cli
+    return _record(args)
+
+
+def _storage_failure(error: OSError, recorder) -> Exception:
+    """The one message for a take file that could not be written: what stays, what to do."""
+    import errno
+
+    from mop.commands._args import CommandError
+
+    what = "no space left on the disk" if error.errno == errno.ENOSPC else \
+        (error.strerror or str(error))
+    kept = recorder.frames_kept
+    if kept == 0:
+        recorder.discard()
+        return CommandError(f"{recorder.path}: {what}; nothing was recorded, so no take was "
+                            f"kept")
+    return CommandError(f"{recorder.path}: {what} during the take; the {kept} frames recorded "
+                        f"before are kept as take {recorder.name} (marked interrupted: `mop "
+                        f"takes show {recorder.name}`)")
 
 
 def _record(args) -> int:
@@ -285,6 +297,8 @@ def _record(args) -> int:
                 print(f"\ninterrupted: the partial take is kept as {recorder.name} (marked "
                       f"interrupted); delete it with `mop takes delete {recorder.name}`",
                       file=sys.stderr)
+            elif isinstance(error, OSError) and error.filename == str(recorder.path):
+                raise _storage_failure(error, recorder) from error
         raise
     finally:
         source.close()

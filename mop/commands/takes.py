@@ -1,6 +1,7 @@
 """`mop takes list|show|export|delete`: the recorded takes of a recordings folder."""
 from __future__ import annotations
 
+import os
 import sys
 from pathlib import Path
 
@@ -25,9 +26,18 @@ def register(subparsers) -> None:
     export.add_argument("--format", choices=("npz", "csv"), default=None,
                         help="default: from the --out suffix, else npz")
     export.add_argument("--out", default=None, metavar="PATH",
-                        help="output file (default: NAME.npz / NAME.csv in the current folder)")
+                        help="output file or folder (default: NAME.npz / NAME.csv in the "
+                             "current folder)")
     export.add_argument("--salvage", action="store_true",
                         help="export what can be read from a damaged take file")
+    export.add_argument("--force", action="store_true", help="replace existing output files")
+    repair = actions.add_parser(
+        "repair", help="make damaged or interrupted take files whole",
+        description="Folds the WAL a killed recording left beside a take back into its file, "
+                    "moves aside a WAL that belongs to another file, and salvages a damaged "
+                    "file (the original is kept as NAME.sqlite.damaged).")
+    repair.add_argument("names", nargs="*", metavar="NAME",
+                        help="the takes to repair (default: every take in the folder)")
     delete = actions.add_parser("delete", help="delete a take file")
     delete.add_argument("name")
     delete.add_argument("--yes", action="store_true", help="do not ask for confirmation")
@@ -45,8 +55,8 @@ def run(args) -> int:
     if not folder.is_dir():
         raise FileNotFoundError(f"take folder not found: {folder}")
     store = TakeStore(folder, create=False)
-    return {"list": _list, "show": _show, "export": _export, "delete": _delete}[command](
-        store, args)
+    return {"list": _list, "show": _show, "export": _export, "delete": _delete,
+            "repair": _repair}[command](store, args)
 
 
 def _list(store, args) -> int:
@@ -87,6 +97,11 @@ def _show(store, args) -> int:
     print(f"  action      {take.action}")
     print(f"  recorded    {take.created or '?'}" + ("" if take.complete else
                                                      "  (INTERRUPTED: ends at its last commit)"))
+    held = float(take.times[-1] - take.times[0]) if take.times.size > 1 else 0.0
+    if take.complete:
+        print(f"  length      {take.duration:.2f} s")
+    else:
+        print(f"  length      {held:.2f} s captured of the planned {take.duration:.2f} s")
     print(f"  device      {take.device or '?'}")
     print(f"  rate        {take.rate:g} Hz (templates)")
     for name, stream in take.streams.items():
@@ -121,19 +136,47 @@ def _show(store, args) -> int:
 def _export(store, args) -> int:
     format = args.format
     out = Path(args.out) if args.out else None
+    is_folder = out is not None and (out.is_dir() or args.out.endswith(("/", os.sep)))
     if format is None:
-        format = out.suffix.lstrip(".") if out is not None and out.suffix in (".npz", ".csv") \
-            else "npz"
+        format = out.suffix.lstrip(".") if out is not None and not is_folder \
+            and out.suffix in (".npz", ".csv") else "npz"
     if out is None:
         out = Path(f"{args.name}.{format}")
+    elif is_folder:
+        out = out / f"{args.name}.{format}"
     try:
-        written = store.export(args.name, out, format=format, salvage=args.salvage)
+        written = store.export(args.name, out, format=format, salvage=args.salvage,
+                               overwrite=args.force)
     except KeyError:
         raise FileNotFoundError(f"no take {args.name!r} in {store.path}; see `mop takes list`"
                                 ) from None
     for path in written:
         print(f"wrote {path}")
     return 0
+
+
+def _repair(store, args) -> int:
+    from mop.takes import check_name
+
+    names = [check_name(name) for name in args.names] or store.names()
+    if not names:
+        print(f"no takes in {store.path}")
+        return 0
+    failed = 0
+    for name in names:
+        try:
+            done = store.repair(name)
+        except KeyError:
+            print(f"{name}: no such take in {store.path}", file=sys.stderr)
+            failed += 1
+            continue
+        except (ValueError, OSError) as error:
+            print(f"{name}: cannot be repaired: {error}", file=sys.stderr)
+            failed += 1
+            continue
+        for line in done or ["healthy: nothing to do"]:
+            print(f"{name}: {line}")
+    return 1 if failed else 0
 
 
 def _delete(store, args) -> int:

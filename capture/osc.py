@@ -3,11 +3,17 @@
 An address -> channels mapping says which OSC messages fill which channels; each datagram that
 carries at least one mapped message becomes one Frame (channels of other addresses hold their
 last value, NaN until first received). Without a mapping the source listens like Wekinator:
-port 6448, address /wek/inputs, as many channels as the first message has arguments.
+port 6448, address /wek/inputs. Give the channels (`?channels=a,b,c` or a count; a session
+passes its performer's channel names) whenever they are known: without them the count is learnt
+from the first `LEARN_RUN` consecutive messages that agree on it, at most `max_channels`
+(default 256), so one hostile packet cannot fix 10,000 channels.
 
-Packets are parsed with `pythonosc.osc_packet.OscPacket` on our own socket rather than through
-python-osc's server, because that server silently drops packets it cannot parse; here garbage,
-wrong argument counts and non-numeric arguments are counted (`stats.malformed`, with the reason in
+Datagrams are taken apart here (bundles walked, at most `MAX_BUNDLE_DEPTH` deep, type tags
+checked) and each message parsed with `pythonosc.osc_message.OscMessage`, on our own socket
+rather than through python-osc's server, because that server silently drops packets it cannot
+parse and python-osc's bundle parser reports odd contents on the root logger (a flood of
+"Could not identify content type" lines on stderr under junk). Here garbage, wrong argument
+counts and non-numeric arguments are counted (`stats.malformed`, with the reason in
 `stats.problems`) and skipped. Datagrams the kernel dropped because the receive buffer was full
 are counted too (Linux SO_RXQ_OVFL) in `stats.dropped`; the kernel reports them with the
 next datagram that does arrive. Nothing is ever sent back to the sender.
@@ -30,15 +36,58 @@ log = logging.getLogger(__name__)
 
 WEKINATOR_PORT = 6448
 WEKINATOR_ADDRESS = "/wek/inputs"
+LEARN_RUN = 3             # consecutive messages that must agree on a learnt channel count
+MAX_CHANNELS = 256        # the most channels a source learns by itself
+MAX_BUNDLE_DEPTH = 8      # bundles nested deeper than this are refused
+_BUNDLE = b"#bundle\x00"
+_TYPE_TAGS = frozenset("ifdsbrhtmTFN[]")   # what python-osc parses without a warning
+
+
+class _Malformed(ValueError):
+    """A datagram that is not valid OSC; the message says why."""
+
+
+def _split_datagram(data: bytes, depth: int = 0) -> list[bytes]:
+    """The OSC messages (as datagrams) inside one datagram: itself, or a bundle's elements,
+    walked recursively. Raises _Malformed with the reason."""
+    if data.startswith(_BUNDLE):
+        if depth >= MAX_BUNDLE_DEPTH:
+            raise _Malformed(f"bundles nested more than {MAX_BUNDLE_DEPTH} deep")
+        if len(data) < 16:
+            raise _Malformed("a bundle shorter than its 16-byte header")
+        messages, index = [], 16
+        while index < len(data):
+            if index + 4 > len(data):
+                raise _Malformed("a bundle element's size is cut off")
+            size = int.from_bytes(data[index:index + 4], "big", signed=True)
+            index += 4
+            if size <= 0 or size % 4 or index + size > len(data):
+                raise _Malformed(f"a bundle element of {size} bytes in {len(data) - index} "
+                                 f"remaining")
+            messages.extend(_split_datagram(data[index:index + size], depth + 1))
+            index += size
+        return messages
+    if not data.startswith(b"/"):
+        raise _Malformed(f"neither an OSC message nor a bundle (starts with {data[:8]!r})")
+    end = data.find(b"\x00")
+    tags_at = (end // 4 + 1) * 4 if end >= 0 else len(data)
+    tags_end = data.find(b"\x00", tags_at)
+    if end < 0 or tags_end < 0 or data[tags_at:tags_at + 1] != b",":
+        raise _Malformed("a message without a type tag string")
+    tags = data[tags_at + 1:tags_end].decode("ascii", "replace")
+    unknown = set(tags) - _TYPE_TAGS
+    if unknown:
+        raise _Malformed(f"unsupported OSC argument type(s) {''.join(sorted(unknown))!r}")
+    return [data]
 _SO_RXQ_OVFL = getattr(socket, "SO_RXQ_OVFL", 40)   # Linux; the constant is missing in Python
 
 
 def _osc_parser():
     try:
-        from pythonosc import osc_packet
+        from pythonosc import osc_message
     except ImportError:
         raise ImportError("OSC sources need python-osc: pip install 'mop[capture]'") from None
-    return osc_packet
+    return osc_message
 
 
 def _names_for(address: str, count: int) -> list[str]:
@@ -60,6 +109,7 @@ class OscSource(ThreadedSource):
     channels : names or count for that address (default: learnt from the first message).
     receive_buffer : [bytes] kernel receive buffer asked for (bursts beyond it are dropped by
         the kernel and counted).
+    max_channels : the most channels learnt from messages when the count is not given.
     """
 
     kind = "osc"
@@ -68,7 +118,8 @@ class OscSource(ThreadedSource):
                  mapping: Mapping[str, Sequence[str] | int | None] | None = None, *,
                  address: str | None = None, channels: Sequence[str] | int | None = None,
                  clock: MonotonicClock | None = None, spec: str = "",
-                 receive_buffer: int = 1 << 20, wait: bool = True, **options):
+                 receive_buffer: int = 1 << 20, max_channels: int = MAX_CHANNELS,
+                 wait: bool = True, **options):
         if mapping is None:
             mapping = {address or WEKINATOR_ADDRESS: channels}
         elif address is not None or channels is not None:
@@ -96,6 +147,10 @@ class OscSource(ThreadedSource):
         if len(set(names)) != len(names):
             raise ValueError(f"OSC channel names must be unique, got {names}")
         self._learn = learn[0] if learn else None
+        self._learn_run = (0, 0)     # (count seen, consecutive messages with that count)
+        self.max_channels = int(max_channels)
+        if self.max_channels < 1:
+            raise ValueError(f"max_channels must be >= 1, got {max_channels}")
         self.host = host
         self.port = int(port)
         if not 0 <= self.port <= 65535:
@@ -171,7 +226,10 @@ class OscSource(ThreadedSource):
                           f"(cut off?)", malformed=True)
             return False
         try:
-            messages = [timed.message for timed in parser.OscPacket(data).messages]
+            messages = [parser.OscMessage(part) for part in _split_datagram(data)]
+        except _Malformed as error:
+            self._problem(f"unparseable packet from {sender[0]}: {error}", malformed=True)
+            return False
         except Exception as error:    # ParseError, and whatever else garbage provokes
             self._problem(f"unparseable packet from {sender[0]}: {error}", malformed=True)
             return False
@@ -179,7 +237,8 @@ class OscSource(ThreadedSource):
         for message in messages:
             address = message.address
             if self._learn is not None and address == self._learn:
-                self._learn_channels(address, len(message.params))
+                if not self._learn_from(address, len(message.params)):
+                    continue
             target = self._slices.get(address)
             if target is None:
                 self._count(unmapped=1)
@@ -210,6 +269,22 @@ class OscSource(ThreadedSource):
             applied = True
         return applied
 
+    def _learn_from(self, address: str, count: int) -> bool:
+        """One message towards learning the channel count; True once it is learnt."""
+        if not 1 <= count <= self.max_channels:
+            self._problem(f"{address}: {count} arguments; a source learns 1..{self.max_channels}"
+                          f" channels (give ?channels= to say how many)", malformed=True)
+            return False
+        seen, run = self._learn_run
+        run = run + 1 if count == seen else 1
+        self._learn_run = (count, run)
+        if run < LEARN_RUN:
+            self._problem(f"{address}: learning the channel count ({count} in {run} of "
+                          f"{LEARN_RUN} messages)")
+            return False
+        self._learn_channels(address, count)
+        return True
+
     def _learn_channels(self, address: str, count: int) -> None:
         if count < 1:
             return
@@ -219,4 +294,5 @@ class OscSource(ThreadedSource):
         self._state = np.full(count, np.nan)
         self._scratch = np.empty(count)
         self._learn = None
-        log.info("OSC %s: %d channels learnt from the first message", address, count)
+        log.info("OSC %s: %d channels learnt from %d messages that agreed", address, count,
+                 LEARN_RUN)

@@ -74,7 +74,9 @@ def test_wekinator_inputs_out_of_the_box(sender):
     with open_source("osc:127.0.0.1:0") as source:     # /wek/inputs, channels learnt
         assert source.channels == ()
         target = ("127.0.0.1", source.port)
-        sender.sendto(message("/wek/inputs", 1.0, 2.0, 3.0, 4.0), target)
+        # the count is learnt from LEARN_RUN (3) consecutive messages that agree on it
+        for first_value in (-1.0, 0.0, 1.0):
+            sender.sendto(message("/wek/inputs", first_value, 2.0, 3.0, 4.0), target)
         first = drain(source, 1)[0]
         assert source.channels == ("inputs.0", "inputs.1", "inputs.2", "inputs.3")
         np.testing.assert_array_equal(first.values, [1, 2, 3, 4])
@@ -194,3 +196,56 @@ def test_bad_arguments_are_rejected():
         OscSource("127.0.0.1", 70000)
     with pytest.raises(ValueError, match="port must be a number"):
         open_source("osc:127.0.0.1:abc/x")
+
+
+def _bundle(*contents: bytes) -> bytes:
+    """A bundle around raw element datagrams (sizes as given, contents unchecked)."""
+    head = b"#bundle\x00" + b"\x00" * 7 + b"\x01"
+    return head + b"".join(len(c).to_bytes(4, "big") + c for c in contents)
+
+
+def test_one_hostile_packet_cannot_fix_the_channel_count(sender):
+    with OscSource("127.0.0.1", 0, address="/in") as source:
+        target = ("127.0.0.1", source.port)
+        sender.sendto(message("/in", *([1.0] * 10000)), target)     # one hostile packet
+        for value in (1.0, 2.0):
+            sender.sendto(message("/in", value, value), target)
+        sender.sendto(message("/in", 7.0, 7.0, 7.0), target)        # breaks the run
+        for value in (3.0, 4.0, 5.0, 6.0):
+            sender.sendto(message("/in", value, value), target)
+        frames = drain(source, 2)
+        assert source.channels == ("in.0", "in.1")
+        assert [f.values.tolist() for f in frames] == [[5.0, 5.0], [6.0, 6.0]]
+        assert source.stats.malformed == 1
+        assert any("10000 arguments" in p for p in source.stats.problems)
+
+
+def test_malformed_bundles_are_counted_not_logged(sender, caplog, capfd):
+    import logging
+    good = message("/glove", 1.0, 2.0)
+    nested = good
+    for _ in range(12):
+        nested = _bundle(nested)
+    junk = [
+        _bundle(b"\x00\x00\x00\x00"),                   # neither message nor bundle inside
+        _bundle(good[:8]),                               # a message cut short
+        _bundle(good) + b"\x00\x00\x01\x00",            # an element larger than what is left
+        _bundle()[:16] + (-4).to_bytes(4, "big", signed=True) + good,   # a negative size
+        nested,                                          # 12 bundles deep
+        _bundle(b"/glove\x00\x00,Iq\x00"),              # type tags python-osc warns about
+        b"#bundle\x00\x00",                              # a header cut short
+    ]
+    with caplog.at_level(logging.DEBUG):
+        with OscSource("127.0.0.1", 0, address="/glove", channels=2) as source:
+            target = ("127.0.0.1", source.port)
+            for _ in range(50):
+                for packet in junk:
+                    sender.sendto(packet, target)
+                time.sleep(0.002)
+            sender.sendto(_bundle(good, message("/glove", 3.0, 4.0)), target)  # a good bundle
+            frames = drain(source, 1)
+            assert wait_for(lambda: source.stats.malformed == 50 * len(junk))
+            assert frames[0].values.tolist() == [3.0, 4.0]
+            assert source.status is Status.OK
+    assert not [r for r in caplog.records if r.name == "root"]
+    assert "Could not identify" not in capfd.readouterr().err

@@ -250,6 +250,9 @@ def _feed(spec: str, performer: PerformerConfig, store, config: SessionConfig, *
         return TakeFeed(data.times, data.values, data.channels, name=name, loop=loop)
     if opener is None:
         from capture import open_source as opener
+    if spec.startswith("osc:") and performer.channels and "channels=" not in spec:
+        # an OSC stream's channels are the performer's: never learnt from a stranger's packet
+        spec += ("&" if "?" in spec else "?") + "channels=" + ",".join(performer.channels)
     return SourceFeed(lambda: opener(spec), name=performer.name,
                       stale_after=performer.stale_after, latency=performer.latency,
                       period=1.0 / config.fps)

@@ -13,7 +13,6 @@ built-in one; errors name the file and the key.
 from __future__ import annotations
 
 import math
-import tomllib
 from dataclasses import dataclass, fields, replace
 from functools import lru_cache
 from pathlib import Path
@@ -126,11 +125,8 @@ def _parse(table: Mapping, source: str, base: Mapping[str, Material] | None = No
 
 
 def _read(path: Path) -> dict:
-    try:
-        with open(path, "rb") as file:
-            return tomllib.load(file)
-    except tomllib.TOMLDecodeError as error:
-        raise ValueError(f"{path}: not valid TOML ({error})") from None
+    from characters.sidecar import read_toml
+    return read_toml(path, "materials file")
 
 
 @lru_cache(maxsize=1)

@@ -161,12 +161,10 @@ class Motion:
     def from_dict(cls, data: Mapping) -> "Motion":
         if not isinstance(data, Mapping):
             raise TypeError(f"a motion dict must be a mapping, got {type(data).__name__}")
+        from characters.sidecar import check_header, numeric_lists
         if data.get("format", FORMAT) != FORMAT:
             raise ValueError(f"not a motion: format is {data.get('format')!r}, expected {FORMAT!r}")
-        version = data.get("version", VERSION)
-        if version != VERSION:
-            raise ValueError(f"motion format version {version!r} is not supported (expected "
-                             f"{VERSION})")
+        check_header(data, format=FORMAT, version=VERSION, where="motion")
         channels = data.get("channels")
         if not isinstance(channels, Mapping):
             raise ValueError("a motion dict needs 'channels': {name: {'times': [...], "
@@ -177,8 +175,12 @@ class Motion:
                     or "values" not in channel):
                 raise ValueError(f"channel {name!r}: expected {{'times': [...], 'values': [...]}}, "
                                  f"got {channel!r:.80}")
-            pairs[name] = (channel["times"], channel["values"])
-        return cls(pairs, interpolation=data.get("interpolation", "linear"))
+            pairs[name] = (numeric_lists(channel["times"], f"channel {name!r}: times"),
+                           numeric_lists(channel["values"], f"channel {name!r}: values"))
+        interpolation = data.get("interpolation", "linear")
+        if not isinstance(interpolation, str):
+            raise TypeError(f"interpolation must be a name, got {interpolation!r:.60}")
+        return cls(pairs, interpolation=interpolation)
 
     def save(self, path) -> None:
         path = Path(path)
@@ -191,10 +193,8 @@ class Motion:
         path = Path(path)
         if path.suffix.lower() != ".json":
             raise ValueError(f"motions are loaded from .json files, got {path}")
-        try:
-            data = json.loads(path.read_text())
-        except json.JSONDecodeError as error:
-            raise ValueError(f"{path}: not valid JSON ({error})") from None
+        from characters.sidecar import read_json
+        data = read_json(path, "motion file")
         try:
             return cls.from_dict(data)
         except (ValueError, TypeError) as error:

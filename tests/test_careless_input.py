@@ -91,3 +91,40 @@ def test_takes_export_never_overwrites_without_force_and_writes_into_a_folder(tm
     assert main([*base, "--out", str(out), "--force"]) == 0
     assert main([*base, "--out", str(out / "csv") + "/", "--format", "csv"]) == 0
     assert sorted(p.name for p in (out / "csv").iterdir()) == ["chomp.aligned.csv", "chomp.csv"]
+
+
+@pytest.mark.parametrize("change, message", [
+    ({"fixed": "false"}, "must be true or false, got 'false' (a string)"),
+    ({"fixed": 0}, "must be true or false"),
+    ({"xy": [1, "2"]}, "must be a number"),
+    ({"xy": [1, True]}, "must be a number"),
+    ({"xy": [1, 2, 3]}, "list of 2 numbers"),
+    ({"xy": [1, float("nan")]}, "must be finite"),
+    ({"fixd": True}, "unknown key(s) 'fixd'"),
+])
+def test_pins_files_are_read_strictly(change, message, tmp_path):
+    import json
+
+    from mop.sidecars import read_pins
+    document = json.loads((DATA / "momo.pins.json").read_text())
+    document["pins"]["head"].update(change)
+    path = tmp_path / "momo.pins.json"
+    path.write_text(json.dumps(document))
+    with pytest.raises((TypeError, ValueError), match=None) as raised:
+        read_pins(path)
+    assert message in str(raised.value) and str(path) in str(raised.value)
+
+
+@pytest.mark.parametrize("version", [99, 0, "1", True, 1.0])
+def test_sidecar_versions_this_mop_does_not_read_are_refused(version, tmp_path):
+    import json
+
+    from characters import Motion
+    from mop.sidecars import read_pins
+    for name, reader in (("momo.pins.json", read_pins), ("momo_wave.json", Motion.load)):
+        document = json.loads((DATA / name).read_text())
+        document["version"] = version
+        path = tmp_path / name
+        path.write_text(json.dumps(document))
+        with pytest.raises((TypeError, ValueError), match="version"):
+            reader(path)

@@ -584,6 +584,8 @@ def load_profile_file(path: str | Path) -> Profile:
         raise FileNotFoundError(f"HID profile file not found: {path}") from None
     except UnicodeDecodeError as error:
         raise ProfileError(f"{path}: not UTF-8 text: {error}") from None
+    except RecursionError:
+        raise ProfileError(f"{path}: TOML nested too deeply to read") from None
     except tomllib.TOMLDecodeError as error:
         raise ProfileError(f"{path}: not valid TOML: {error}") from None
     return parse_profile(data, path=path)

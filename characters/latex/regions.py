@@ -19,7 +19,6 @@ the mouth gap). Regions must be disjoint and made of adjacent vertices.
 """
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -71,10 +70,8 @@ class Opening:
 
 
 def _vector(value, what: str) -> tuple:
-    array = np.asarray(value, dtype=np.float64)
-    if array.shape != (3,) or not np.all(np.isfinite(array)):
-        raise ValueError(f"{what} must be 3 finite numbers, got {value!r}")
-    return tuple(float(v) for v in array)
+    from characters.sidecar import point
+    return point(value, what, 3)
 
 
 def parse_opening(value, what: str) -> Opening | None:
@@ -90,6 +87,7 @@ def parse_opening(value, what: str) -> Opening | None:
         if not isinstance(body, Mapping) or set(body) - {"origin", "axis", "degrees"}:
             raise ValueError(f"{what}: open.rotate takes origin, axis and degrees, got {body!r}")
         axis = np.asarray(_vector(body.get("axis", (1, 0, 0)), f"{what}: open.rotate.axis"))
+        axis = axis / max(float(np.max(np.abs(axis))), 1e-300)   # no overflow in the norm
         if np.linalg.norm(axis) == 0:
             raise ValueError(f"{what}: open.rotate.axis must not be zero")
         degrees = body.get("degrees")
@@ -130,7 +128,8 @@ def _parse_one(name: str, value, source: str) -> RegionSpec:
         if "center" not in value or "radius" not in value:
             raise ValueError(f"{what}: expected 'vertices' or 'center' and 'radius'")
         radius = value["radius"]
-        if isinstance(radius, bool) or not isinstance(radius, (int, float)) or not radius > 0:
+        if isinstance(radius, bool) or not isinstance(radius, (int, float)) or not radius > 0 \
+                or not math.isfinite(radius):
             raise ValueError(f"{what}: radius must be a length > 0 [m], got {radius!r}")
         return RegionSpec(name, center=_vector(value["center"], f"{what}: center"),
                           radius=float(radius), opening=opening)
@@ -138,13 +137,14 @@ def _parse_one(name: str, value, source: str) -> RegionSpec:
 
 
 def _indices(value, what: str) -> np.ndarray:
-    array = np.asarray(value)
-    if array.ndim != 1 or array.size == 0:
-        raise ValueError(f"{what}: vertices must be a non-empty list of vertex indices, got "
-                         f"shape {array.shape}")
-    if not np.issubdtype(array.dtype, np.integer):
-        raise TypeError(f"{what}: vertices must be integers, got dtype {array.dtype}")
-    return array.astype(np.int64)
+    if isinstance(value, np.ndarray):
+        if value.ndim != 1 or value.size == 0 or not np.issubdtype(value.dtype, np.integer):
+            raise TypeError(f"{what}: vertices must be a non-empty 1-D integer array, got "
+                            f"{value.dtype} {value.shape}")
+        return value.astype(np.int64)
+    from characters.sidecar import indices
+    return indices(list(value) if isinstance(value, (range, set, frozenset)) else value,
+                   f"{what}: vertices")
 
 
 def parse_regions(spec, *, source: str = "finger_regions"):
@@ -152,22 +152,23 @@ def parse_regions(spec, *, source: str = "finger_regions"):
     Returns ({finger: RegionSpec} in finger order, {landmark: (L,) int64 input indices})."""
     landmarks: dict[str, np.ndarray] = {}
     if isinstance(spec, (str, Path)):
+        from characters.sidecar import read_json
         path = Path(spec)
-        if not path.exists():
-            raise FileNotFoundError(f"finger region file not found: {path}")
-        try:
-            spec = json.loads(path.read_text())
-        except json.JSONDecodeError as error:
-            raise ValueError(f"{path}: not valid JSON ({error})") from None
+        spec = read_json(path, "finger region file")
         source = str(path)
     if not isinstance(spec, Mapping):
-        raise TypeError(f"finger_regions must be a path, a dict {{finger: vertices or spec}} or "
-                        f"None, got {type(spec).__name__}")
+        raise TypeError(f"{source}: finger regions must be a path, a dict {{finger: vertices or "
+                        f"spec}} or None, got {type(spec).__name__}")
     if "regions" in spec:
+        from characters.sidecar import check_header
         if spec.get("format", SIDECAR_FORMAT) != SIDECAR_FORMAT:
             raise ValueError(f"{source}: format must be {SIDECAR_FORMAT!r}, got "
                              f"{spec.get('format')!r}")
-        for name, value in (spec.get("landmarks") or {}).items():
+        check_header(spec, format=SIDECAR_FORMAT, version=1, where=source)
+        marks = spec.get("landmarks") or {}
+        if not isinstance(marks, Mapping):
+            raise TypeError(f"{source}: 'landmarks' must map names to vertex lists")
+        for name, value in marks.items():
             landmarks[str(name)] = _indices(value, f"{source}: landmark {name!r}")
         spec = spec["regions"]
         if not isinstance(spec, Mapping):

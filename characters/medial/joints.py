@@ -28,14 +28,15 @@ PIVOT_TOLERANCE = 0.15
 
 
 def _vector3(value, what: str) -> np.ndarray:
-    array = np.asarray(value, dtype=np.float64)
-    if array.shape != (3,) or not np.all(np.isfinite(array)):
-        raise ValueError(f"{what} must be 3 finite numbers, got {value!r}")
-    return array
+    from characters.sidecar import point
+    return np.asarray(point(value, what, 3), dtype=np.float64)
 
 
 def _unit3(value, what: str) -> np.ndarray:
     array = _vector3(value, what)
+    largest = float(np.max(np.abs(array)))
+    if largest > 0:
+        array = array / largest     # a direction: scaled first, so 1e308 does not overflow
     norm = float(np.linalg.norm(array))
     if norm < 1e-12:
         raise ValueError(f"{what} must be a non-zero vector, got {value!r}")
@@ -132,12 +133,8 @@ class JointSpec:
 
     @classmethod
     def load(cls, path) -> "JointSpec":
-        with open(path, encoding="utf-8") as handle:
-            try:
-                data = json.load(handle)
-            except json.JSONDecodeError as error:
-                raise ValueError(f"{path}: not valid JSON ({error})") from None
-        return cls.from_dict(data, where=str(path))
+        from characters.sidecar import read_json
+        return cls.from_dict(read_json(path, "joints file"), where=str(path))
 
     def save(self, path) -> None:
         with open(path, "w", encoding="utf-8") as handle:

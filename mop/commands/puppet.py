@@ -9,7 +9,6 @@ picture pixels over time (characters.Motion JSON).
 """
 from __future__ import annotations
 
-import json
 import sys
 import time
 from pathlib import Path
@@ -50,31 +49,15 @@ def register(subparsers) -> None:
 
 
 def load_pins(path: Path) -> dict:
-    """A pins JSON file -> {name: {"xy": [x, y], "fixed": bool}}."""
-    try:
-        data = json.loads(path.read_text())
-    except FileNotFoundError:
-        raise FileNotFoundError(f"pins file not found: {path}") from None
-    except json.JSONDecodeError as error:
-        raise ValueError(f"{path}: not valid JSON ({error})") from None
-    return parse_pins(data.get("pins", data) if isinstance(data, dict) else data, str(path))
+    """A pins JSON file -> {name: {"xy": (x, y), "fixed": bool}} (strict: `mop.sidecars`)."""
+    from mop.sidecars import read_pins
+    return {name: {"xy": pin.xy, "fixed": pin.fixed} for name, pin in read_pins(path).items()}
 
 
 def parse_pins(pins, where: str) -> dict:
-    if not isinstance(pins, dict) or not pins:
-        raise ValueError(f"{where}: expected pins as {{name: {{'xy': [x, y], 'fixed': false}}}}, "
-                         f"got {str(pins)[:80]}")
-    parsed = {}
-    for name, pin in pins.items():
-        entry = pin if isinstance(pin, dict) else {"xy": pin}
-        xy = entry.get("xy")
-        try:
-            x, y = (float(v) for v in xy)
-        except (TypeError, ValueError):
-            raise ValueError(f"{where}: pin {name!r} needs 'xy': [x, y] in pixels, got "
-                             f"{xy!r}") from None
-        parsed[name] = {"xy": (x, y), "fixed": bool(entry.get("fixed", False))}
-    return parsed
+    from mop.sidecars import parse_pins as parse
+    return {name: {"xy": pin.xy, "fixed": pin.fixed}
+            for name, pin in parse(pins, where=where).items()}
 
 
 def run(args) -> int:
@@ -85,6 +68,7 @@ def run(args) -> int:
     from characters import ImagePuppet, Motion
     from mop.export import open_writer
     from mop.render.image2d import ImageRenderer, puppet_preview
+    from mop.sidecars import read_json
 
     if args.out is None and args.show_mesh is None:
         raise ValueError("nothing to do: give --out OUT (with --motion) and/or --show-mesh PNG")
@@ -97,9 +81,9 @@ def run(args) -> int:
     pins = None
     if args.motion is not None:
         motion = Motion.load(args.motion)
-        data = json.loads(args.motion.read_text())
+        data = read_json(args.motion, "motion file")
         if isinstance(data, dict) and "pins" in data:
-            pins = parse_pins(data["pins"], str(args.motion))
+            pins = parse_pins(data["pins"], f"{args.motion}: pins")
     if args.pins is not None:
         pins = load_pins(args.pins)
     if pins is None:

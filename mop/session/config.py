@@ -38,6 +38,7 @@ from pathlib import Path
 from types import MappingProxyType
 from typing import Any, Mapping
 
+from characters.sidecar import read_toml
 from mop.export import parse_background
 
 DEFAULTS_PATH = Path(__file__).with_name("defaults.toml")
@@ -297,10 +298,9 @@ def load_session(path: str | Path) -> SessionConfig:
     if not path.is_file():
         raise FileNotFoundError(f"session file not found: {path}")
     try:
-        with open(path, "rb") as handle:
-            user = tomllib.load(handle)
-    except tomllib.TOMLDecodeError as error:
-        raise SessionError(f"{path}: not valid TOML: {error}") from None
+        user = read_toml(path, "session file")
+    except ValueError as error:
+        raise SessionError(str(error)) from None
     return parse_session(user, where=str(path), base=path.resolve().parent, path=path.resolve())
 
 

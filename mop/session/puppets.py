@@ -138,15 +138,12 @@ def _image(character: CharacterConfig, height: int):
 
 def read_pins(path: Path) -> tuple[dict, dict]:
     """({driven pin: (x, y)}, {anchor: (x, y)}) from a shipped `NAME.pins.json`
-    ({"format": "mop.pins", "pins": {name: {"xy": [x, y], "fixed": bool}}})."""
-    import json
-    document = json.loads(Path(path).read_text())
-    if document.get("format") != "mop.pins" or not isinstance(document.get("pins"), dict):
-        raise ValueError(f"{path}: expected a mop.pins document with a 'pins' table")
+    ({"format": "mop.pins", "pins": {name: {"xy": [x, y], "fixed": bool}}}; strict, see
+    `mop.sidecars`)."""
+    from mop.sidecars import read_pins as read
     pins, anchors = {}, {}
-    for name, pin in document["pins"].items():
-        xy = tuple(float(v) for v in pin["xy"])
-        (anchors if pin.get("fixed") else pins)[name] = xy
+    for name, pin in read(path).items():
+        (anchors if pin.fixed else pins)[name] = pin.xy
     return pins, anchors
 
 

@@ -128,3 +128,87 @@ def test_sidecar_versions_this_mop_does_not_read_are_refused(version, tmp_path):
         path.write_text(json.dumps(document))
         with pytest.raises((TypeError, ValueError), match="version"):
             reader(path)
+
+
+def _long_motion(tmp_path, seconds=4e6) -> Path:
+    import json
+    document = json.loads((DATA / "momo_wave.json").read_text())
+    for channel in document["channels"].values():
+        last = channel["times"][-1]
+        channel["times"] = [t * seconds / last for t in channel["times"]]
+    path = tmp_path / "long.json"
+    path.write_text(json.dumps(document))
+    return path
+
+
+def test_a_render_of_a_huge_motion_is_refused_with_the_limit(tmp_path, capsys):
+    motion = _long_motion(tmp_path)
+    code = main(["puppet", str(DATA / "momo.png"), "--motion", str(motion), "--out",
+                 str(tmp_path / "x.mp4")])
+    err = capsys.readouterr().err
+    assert code == 1
+    assert "100,000,001 frames" in err and "--max-frames 100000001" in err
+    assert not (tmp_path / "x.mp4").exists()
+
+
+def test_recording_along_a_huge_motion_is_refused_with_the_limit(tmp_path, capsys):
+    code = main(["record", "--performer", "a", "--action", "b", "--motion",
+                 str(_long_motion(tmp_path)), "--source", "replay:x", "--recordings",
+                 str(tmp_path / "takes"), "--preview", str(tmp_path / "p.mp4")])
+    err = capsys.readouterr().err
+    assert code == 1
+    assert "the motion lasts 4e+06 s" in err and "--max-duration 4000000" in err
+    assert not (tmp_path / "p.mp4").exists()
+
+
+def test_a_work_estimate_warns_once_when_minutes_are_ahead():
+    import io
+
+    from mop.commands._args import WorkEstimate
+    stream = io.StringIO()
+    estimate = WorkEstimate(100_000, "rendering x.mp4", stream=stream, after=0.0)
+    estimate.started -= 10.0            # 10 s for the first 10 frames: hours ahead
+    assert estimate.update(10) > 3600
+    assert estimate.update(20) is None  # said once
+    assert stream.getvalue().count("warning: rendering x.mp4: about") == 1
+
+
+@pytest.mark.parametrize("shape", ["sphere", "two spheres"])
+def test_automatic_finger_regions_stay_disjoint_on_ordinary_meshes(shape):
+    import trimesh
+
+    from characters import LatexPuppet
+    sphere = trimesh.creation.icosphere(subdivisions=3, radius=0.05)
+    mesh = sphere if shape == "sphere" else trimesh.util.concatenate(
+        [sphere, sphere.copy().apply_translation([0.15, 0, 0])])
+    puppet = LatexPuppet.from_mesh(mesh, masses=300)
+    regions = list(puppet.regions.values())
+    assert len(regions) == 5 and all(len(r) for r in regions)
+    members = np.concatenate([np.asarray(r).ravel() for r in regions])
+    assert len(np.unique(members)) == len(members)
+
+
+def test_a_medial_asset_of_random_bytes_or_nan_is_named_for_what_it_is(tmp_path, rng):
+    import trimesh
+
+    from characters import MedialObject
+    junk = tmp_path / "junk.obj"
+    junk.write_bytes(rng.bytes(4096))
+    with pytest.raises(ValueError, match="junk.obj"):
+        MedialObject.from_mesh(junk)
+    sphere = trimesh.creation.icosphere(subdivisions=2)
+    vertices = sphere.vertices.copy()
+    vertices[7] = np.nan
+    nan = tmp_path / "nan.obj"
+    trimesh.Trimesh(vertices, sphere.faces, process=False).export(nan)
+    with pytest.raises(ValueError, match="1 vertices with NaN or infinite coordinates"):
+        MedialObject.from_mesh(nan)
+
+
+def test_a_medial_mesh_too_large_is_refused_with_how_to_lift_it():
+    import trimesh
+
+    from characters import MedialObject
+    big = trimesh.creation.icosphere(subdivisions=5)      # 20,480 faces: minutes of Voronoi
+    with pytest.raises(ValueError, match="20,480 faces.*max_faces=20480"):
+        MedialObject.from_mesh(big)

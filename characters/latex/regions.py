@@ -271,19 +271,32 @@ def auto_regions(vertices: np.ndarray, radius: float) -> dict[str, RegionSpec]:
     height = float(hi[1] - lo[1])
     slab = 0.2 * width
     radius = min(radius, 0.4 * slab)
-    specs = {}
-    middle = np.abs(vertices[:, 0] - 0.5 * (lo[0] + hi[0])) < 0.5 * slab
-    bottom = vertices[np.flatnonzero(middle)[np.argmin(vertices[middle, 1])]]
-    specs["thumb"] = RegionSpec("thumb", center=tuple(bottom), radius=radius,
-                                opening=Opening("translate", offset=(0.0, -0.15 * height, 0.0)))
+
+    def band(x: float, half_width: float) -> np.ndarray:
+        # vertices within the band around x, or (a mesh in pieces, a gap there) the nearest
+        near = np.flatnonzero(np.abs(vertices[:, 0] - x) < half_width)
+        return near if near.size else np.array([int(np.argmin(np.abs(vertices[:, 0] - x)))])
+
+    middle = band(0.5 * (lo[0] + hi[0]), 0.5 * slab)
+    centres = {"thumb": vertices[middle[np.argmin(vertices[middle, 1])]]}
     for k, name in enumerate(FINGERS[1:]):
-        x = lo[0] + (0.2 + 0.2 * k) * width
-        near = np.flatnonzero(np.abs(vertices[:, 0] - x) < 0.25 * slab)
-        if near.size == 0:
-            near = np.array([int(np.argmin(np.abs(vertices[:, 0] - x)))])
-        top = vertices[near[np.argmax(vertices[near, 1])]]
-        specs[name] = RegionSpec(name, center=tuple(top), radius=radius,
-                                 opening=Opening("translate", offset=(0.0, 0.15 * height, 0.0)))
+        near = band(lo[0] + (0.2 + 0.2 * k) * width, 0.25 * slab)
+        centres[name] = vertices[near[np.argmax(vertices[near, 1])]]
+    # balls of a radius under half the closest two centres' distance share no vertex
+    points = np.array(list(centres.values()))
+    gaps = np.linalg.norm(points[:, None] - points[None], axis=2)
+    closest = float(gaps[np.triu_indices(len(points), 1)].min())
+    if not closest > 0:
+        raise ValueError("automatic finger regions need five distinct places on the mesh (the "
+                         "bottom of its middle and the tops of four slabs across its width), "
+                         "and this mesh has too few distinct vertices there; give "
+                         "finger_regions explicitly")
+    radius = min(radius, 0.49 * closest)
+    specs = {}
+    for name, centre in centres.items():
+        offset = (0.0, (-0.15 if name == "thumb" else 0.15) * height, 0.0)
+        specs[name] = RegionSpec(name, center=tuple(centre), radius=radius,
+                                 opening=Opening("translate", offset=offset))
     return specs
 
 

@@ -37,7 +37,7 @@ from ..model import MassSpring
 from . import joints as joint_kernels
 from .constraints import BoneSpringReduction
 from .joints import JointCut, JointSpec, JointTree
-from .mesh_input import load_closed_mesh
+from .mesh_input import MAX_FACES, load_closed_mesh
 from .skeleton import Skeleton, skeletonize
 
 log = logging.getLogger(__name__)
@@ -274,7 +274,8 @@ class MedialObject:
     def from_mesh(cls, mesh, *, material="skin", constraint="circumsphere", joints=None,
                   f_min: float | None = None, f_max: float | None = None, mass: float = 1.0,
                   iterations: int = 8, substeps: int | None = None,
-                  check_self_intersections: bool = True) -> "MedialObject":
+                  check_self_intersections: bool = True,
+                  max_faces: int = MAX_FACES) -> "MedialObject":
         """Build a medial object from a closed surface.
 
         mesh : path or trimesh.Trimesh     closed, consistently wound surface (see mesh_input for
@@ -289,6 +290,8 @@ class MedialObject:
         iterations : int                   spring-reduction passes per substep
         substeps : int | None              Verlet substeps per step; None = as many as the
                                            material's stiffness needs for stability
+        max_faces : int                    refuse larger meshes (the Voronoi step takes minutes
+                                           beyond it); raise it to build one anyway
         """
         constraint = ConstraintMethod.parse(constraint)
         medial_material = _as_medial_material(material)
@@ -304,7 +307,8 @@ class MedialObject:
         if substeps is not None and (not isinstance(substeps, (int, np.integer)) or substeps < 1):
             raise ValueError(f"substeps must be None or an int >= 1, got {substeps!r}")
         spec = JointSpec.coerce(joints)
-        surface = load_closed_mesh(mesh, check_self_intersections=check_self_intersections)
+        surface = load_closed_mesh(mesh, check_self_intersections=check_self_intersections,
+                                   max_faces=max_faces)
         skeleton = skeletonize(surface)
         fallback = float(skeleton.fallback.mean())
         if fallback > TOO_COARSE_FALLBACK:

@@ -88,3 +88,45 @@ def positive(text: str) -> float:
     if not value > 0:
         raise argparse.ArgumentTypeError(f"the value must be > 0, got {text}")
     return value
+
+
+MAX_FRAMES = 90_000     # frames a command renders without being asked: an hour at 25 fps
+
+
+def check_frame_budget(frames: int, *, fps: float, limit: int = MAX_FRAMES) -> None:
+    """Refuse work whose frame count is beyond `limit`, saying how to lift it."""
+    if frames > limit:
+        raise CommandError(f"this would render {frames:,} frames ({frames / fps / 3600:.3g} h "
+                           f"at {fps:g} fps); the limit is {limit:,}: render a part with "
+                           f"--duration SECONDS, or lift the limit with --max-frames {frames}")
+
+
+class WorkEstimate:
+    """Says once, a few seconds into a long job, how long the whole of it will take, when that
+    is more than `threshold` seconds: `estimate.update(done)` after each unit of work."""
+
+    def __init__(self, total: int, what: str, *, stream=None, after: float = 3.0,
+                 threshold: float = 60.0):
+        import sys
+        import time
+        self.total, self.what = int(total), what
+        self.stream = stream if stream is not None else sys.stderr
+        self.after, self.threshold = after, threshold
+        self._clock = time.perf_counter
+        self.started = self._clock()
+        self.said = False
+
+    def update(self, done: int) -> float | None:
+        """The estimated seconds left once said, else None."""
+        if self.said or done <= 0:
+            return None
+        elapsed = self._clock() - self.started
+        if elapsed < self.after:
+            return None
+        self.said = True
+        left = elapsed / done * (self.total - done)
+        if left > self.threshold:
+            print(f"warning: {self.what}: about {left / 60:.1f} min more for {self.total:,} "
+                  f"frames ({done / elapsed:.3g} frames/s); Ctrl-C stops and keeps what is "
+                  f"done", file=self.stream, flush=True)
+        return left

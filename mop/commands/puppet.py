@@ -15,7 +15,7 @@ from pathlib import Path
 
 
 def register(subparsers) -> None:
-    from mop.commands._args import positive, rate, seconds_or_zero
+    from mop.commands._args import MAX_FRAMES, positive, rate, seconds_or_zero
 
     parser = subparsers.add_parser(
         "puppet", help="animate a picture as an elastic puppet and render it",
@@ -41,6 +41,9 @@ def register(subparsers) -> None:
     parser.add_argument("--fps", type=rate, default=25.0, help="frames per second (25)")
     parser.add_argument("--duration", type=seconds_or_zero, default=None,
                         help="seconds to render (default: the motion's duration)")
+    parser.add_argument("--max-frames", type=int, default=MAX_FRAMES, metavar="N",
+                        help=f"refuse to render more frames than this (default {MAX_FRAMES:,}, "
+                             f"an hour at 25 fps)")
     parser.add_argument("--cell-size", type=positive, default=None,
                         help="mesh cell size in picture pixels (default: 1/24 of the character)")
     parser.add_argument("--tolerance", type=float, default=None,
@@ -68,6 +71,7 @@ def run(args) -> int:
     from characters import ImagePuppet, Motion
     from mop.export import open_writer
     from mop.render.image2d import ImageRenderer, puppet_preview
+    from mop.commands._args import WorkEstimate, check_frame_budget
     from mop.sidecars import read_json
 
     if args.out is None and args.show_mesh is None:
@@ -116,6 +120,8 @@ def run(args) -> int:
     if not duration >= 0:
         raise ValueError(f"--duration must be >= 0 s, got {duration}")
     frame_count = int(np.floor(duration * args.fps + 1e-9)) + 1
+    check_frame_budget(frame_count, fps=args.fps, limit=args.max_frames)
+    estimate = WorkEstimate(frame_count, f"rendering {args.out}")
     renderer = ImageRenderer(puppet.image, puppet.vertices, puppet.triangles,
                              size=(width, height), background=args.background or "transparent")
     frame = np.empty((height, width, 4), np.uint8)
@@ -140,6 +146,7 @@ def run(args) -> int:
             simulate_time += tock - tick
             render_time += time.perf_counter() - tock
             progress.update(1)
+            estimate.update(index + 1)
     print(f"wrote {args.out}: {frame_count} frames {width}x{height} at {args.fps:g} fps "
           f"(simulation {1e3 * simulate_time / frame_count:.2f} ms/frame, render+encode "
           f"{1e3 * render_time / frame_count:.2f} ms/frame)")

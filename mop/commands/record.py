@@ -10,16 +10,18 @@ takes: how confusable it is with them (`followers.confusability`).
 """
 from __future__ import annotations
 
+import math
 import re
 import sys
 from pathlib import Path
 
 PREVIEW_SIZE = (640, 360)
 PREVIEW_FPS = 25
+MAX_TAKE_SECONDS = 600.0    # a demonstration is seconds long; a longer motion is a mistake
 
 
 def register(subparsers) -> None:
-    from mop.commands._args import rate, seconds, seconds_or_zero
+    from mop.commands._args import positive, rate, seconds, seconds_or_zero
 
     parser = subparsers.add_parser(
         "record", help="record a take: act along with a motion while a source is captured",
@@ -46,6 +48,9 @@ def register(subparsers) -> None:
     parser.add_argument("--preview", default=None, metavar="VIDEO",
                         help="where to write the motion preview video (default: "
                              "out/preview-ACTION.mp4; 'none' to skip)")
+    parser.add_argument("--max-duration", type=positive, default=MAX_TAKE_SECONDS,
+                        metavar="SECONDS",
+                        help=f"refuse motions longer than this (default {MAX_TAKE_SECONDS:g} s)")
     parser.add_argument("--wait", type=seconds, default=5.0,
                         help="seconds to wait for the source's first frame (default 5)")
     parser.set_defaults(func=run)
@@ -218,6 +223,11 @@ def _record(args) -> int:
     duration = float(motion.duration)
     if not duration > 0:
         raise ValueError(f"the motion lasts {duration} s; nothing to act along with")
+    if duration > args.max_duration:
+        raise ValueError(f"the motion lasts {duration:.6g} s: a take that long (and its "
+                         f"{int(duration * PREVIEW_FPS):,}-frame preview) is refused; the limit "
+                         f"is {args.max_duration:g} s: use a shorter motion, or lift the limit "
+                         f"with --max-duration {math.ceil(duration)}")
 
     preview = None
     if (args.preview or "").lower() != "none":

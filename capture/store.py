@@ -64,6 +64,7 @@ APPLICATION_ID = 0x4D4F5054          # "MOPT"
 SUFFIX = ".sqlite"
 _SQLITE_MAGIC = b"SQLite format 3\x00"
 _TABLES = ("meta", "streams", "frames", "attachments")
+_MAX_ALONE_BYTES = 1 << 30      # a main file read whole to check a WAL's owner (hours of frames)
 
 _SCHEMA = """
 CREATE TABLE meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
@@ -548,6 +549,9 @@ def _wal_path(path: Path) -> Path:
 
 def _main_file_alone(path: Path) -> sqlite3.Connection | None:
     """The store as its main file holds it without the WAL (an in-memory copy), or None."""
+    if path.stat().st_size > _MAX_ALONE_BYTES:
+        log.info("take store %s: too large to check its WAL's owner in memory", path)
+        return None
     data = bytearray(path.read_bytes())
     if len(data) < 512 or data[:16] != _SQLITE_MAGIC:
         return None

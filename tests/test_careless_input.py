@@ -212,3 +212,12 @@ def test_a_medial_mesh_too_large_is_refused_with_how_to_lift_it():
     big = trimesh.creation.icosphere(subdivisions=5)      # 20,480 faces: minutes of Voronoi
     with pytest.raises(ValueError, match="20,480 faces.*max_faces=20480"):
         MedialObject.from_mesh(big)
+
+
+def test_a_replay_of_a_day_is_refused_with_the_limit(tmp_path, capsys):
+    from session_files import write_session
+    session = write_session(tmp_path)
+    assert main(["perform", str(session), "--replay", "--loop", "--duration", "86400",
+                 "--out", str(tmp_path / "x.mp4")]) == 1
+    assert "2,160,000 frames" in capsys.readouterr().err
+    assert not (tmp_path / "x.mp4").exists()

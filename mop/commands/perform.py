@@ -7,7 +7,7 @@ import time
 
 
 def register(subparsers) -> None:
-    from mop.commands._args import port, seconds
+    from mop.commands._args import MAX_FRAMES, port, seconds
 
     parser = subparsers.add_parser(
         "perform", help="perform a session: performers drive characters, live or from takes",
@@ -39,6 +39,9 @@ def register(subparsers) -> None:
                         help="send every character's state as OSC to this address")
     parser.add_argument("--no-render", action="store_true",
                         help="follow and simulate only (OSC out, timing), no pictures")
+    parser.add_argument("--max-frames", type=int, default=MAX_FRAMES, metavar="N",
+                        help=f"in replay mode, refuse a --duration that renders more frames "
+                             f"(default {MAX_FRAMES:,}, an hour at 25 fps)")
     parser.add_argument("--quiet", action="store_true", help="no progress lines")
     parser.set_defaults(func=run)
 
@@ -127,6 +130,11 @@ def run(args) -> int:
     if args.no_render and (args.out or args.png):
         raise ValueError("--out and --png need pictures: leave out --no-render")
     mode = Mode.REPLAY if args.replay is not None and not args.realtime else Mode.LIVE
+    if mode is Mode.REPLAY and args.duration is not None and not args.no_render:
+        # as fast as the machine goes: a long --duration is hours of rendering
+        from mop.commands._args import check_frame_budget
+        check_frame_budget(int(args.duration * config.fps), fps=config.fps,
+                           limit=args.max_frames)
     if mode is Mode.REPLAY and args.loop and args.duration is None:
         raise ValueError("--loop replays the takes forever, and without --realtime as fast as "
                          "the machine goes (a video without end): give --duration SECONDS, or "

@@ -530,6 +530,8 @@ def _open_readonly(path: Path, *, check_wal: bool = True) -> sqlite3.Connection:
         raise FileNotFoundError(f"take store not found: {path}")
     if path.is_dir():
         raise StoreError(f"{path} is a folder, not a take store file", path=path)
+    if not path.is_file():      # a pipe or a device would block or never end
+        raise StoreError(f"{path} is not a regular file (a pipe, socket or device)", path=path)
     with open(path, "rb") as handle:
         head = handle.read(16)
     if head != _SQLITE_MAGIC:
@@ -622,6 +624,8 @@ def fold_wal(path: str | os.PathLike) -> bool:
     StoreError (see `check_wal_belongs`)."""
     path = Path(path)
     wal = _wal_path(path)
+    if not path.is_file():
+        return False            # not there, or not a regular file: the reader says what it is
     if not wal.is_file():
         with open(path, "rb") as handle:
             header = handle.read(20)

@@ -26,6 +26,8 @@ def read_json(path: str | Path, what: str = "file") -> Any:
         raise FileNotFoundError(f"{what} not found: {path}")
     if path.is_dir():
         raise ValueError(f"{path}: a folder, expected a JSON {what}")
+    if not path.is_file():      # a pipe or a device would block or never end
+        raise ValueError(f"{path}: not a regular file, expected a JSON {what}")
     try:
         return json.loads(path.read_bytes().decode("utf-8"))
     except UnicodeDecodeError as error:
@@ -102,6 +104,8 @@ def read_toml(path: str | Path, what: str = "file") -> dict:
         raise FileNotFoundError(f"{what} not found: {path}")
     if path.is_dir():
         raise ValueError(f"{path}: a folder, expected a TOML {what}")
+    if not path.is_file():      # a pipe or a device would block or never end
+        raise ValueError(f"{path}: not a regular file, expected a TOML {what}")
     try:
         return tomllib.loads(path.read_bytes().decode("utf-8"))
     except UnicodeDecodeError as error:

@@ -221,3 +221,16 @@ def test_a_replay_of_a_day_is_refused_with_the_limit(tmp_path, capsys):
                  "--out", str(tmp_path / "x.mp4")]) == 1
     assert "2,160,000 frames" in capsys.readouterr().err
     assert not (tmp_path / "x.mp4").exists()
+
+
+def test_a_pipe_in_place_of_a_file_is_named_not_waited_on(tmp_path, capsys):
+    import os
+    folder = tmp_path / "takes"
+    folder.mkdir()
+    os.mkfifo(folder / "x.sqlite")
+    os.mkfifo(tmp_path / "motion.json")
+    assert main(["takes", "--recordings", str(folder), "list"]) == 0
+    assert "x  DAMAGED: " in capsys.readouterr().out
+    assert main(["puppet", str(DATA / "momo.png"), "--motion", str(tmp_path / "motion.json"),
+                 "--out", str(tmp_path / "x.mp4")]) == 1
+    assert "not a regular file" in capsys.readouterr().err

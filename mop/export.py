@@ -405,7 +405,13 @@ class PngSequenceWriter(FrameWriter):
             image = Image.fromarray(np.ascontiguousarray(frame), mode="RGBA")
         target = self.frame_path(self.frames_written)
         partial = target.with_name(target.name + ".part")
-        image.save(partial, format="PNG", compress_level=1)
+        try:
+            image.save(partial, format="PNG", compress_level=1)
+        except OSError as error:
+            partial.unlink(missing_ok=True)     # never a half-written frame left behind
+            raise OSError(error.errno, f"frame {self.frames_written} could not be written "
+                                       f"({error.strerror or error}); the {self.frames_written} "
+                                       f"frames before it are complete", str(target)) from None
         os.replace(partial, target)
 
     @staticmethod

@@ -522,6 +522,9 @@ class TakeStore:
         destination (an existing one, or a path ending in '/') gets <folder>/<name>.<format>.
         Existing files are an error (FileExistsError) unless overwrite=True."""
         destination = Path(destination)
+        if destination.exists() and not destination.is_dir() and not destination.is_file():
+            raise ValueError(f"{destination} is not a regular file or folder (a device or "
+                             f"pipe): export to a file")
         folder = destination.is_dir() or str(destination).endswith(("/", os.sep))
         format = (format or ("" if folder else destination.suffix.lstrip(".")) or "npz").lower()
         if format not in ("npz", "csv"):

@@ -372,3 +372,21 @@ def test_a_glove_stuck_at_an_absurd_value_plays_nothing(value, tmp_path):
     assert len(heard) >= 50                 # 4 s at 25 fps, what was said frame by frame
     played = [a for a in heard if a]
     assert played == [], f"a glove stuck at {value} played {sorted(set(played))}"
+
+
+@needs_small_disk
+def test_a_full_disk_during_png_frames_keeps_the_frames_before_it(tmp_path):
+    from PIL import Image
+
+    disk, keep = tmp_path / "disk", tmp_path / "keep"
+    result = run_on_small_disk(
+        ["puppet", str(DATA / "momo.png"), "--motion", str(DATA / "momo_wave.json"), "--out",
+         str(disk / "frames")], disk=disk, size_kb=2048, keep=keep)
+    assert result.returncode == 1, (result.stdout, result.stderr)
+    line = _one_error_line(result.stderr, "mop puppet: error", "no space left",
+                           "frames before it are complete")
+    frames = sorted((keep / "frames").iterdir())
+    assert frames and all(f.suffix == ".png" for f in frames)       # no .part left behind
+    assert f"the {len(frames)} frames before it" in line
+    for frame in frames:                                             # each one whole
+        Image.open(frame).load()

@@ -18,21 +18,29 @@ from typing import Any, Mapping
 import numpy as np
 
 
+def _text(path: Path, kind: str, what: str) -> str:
+    """A file's text; a missing file is FileNotFoundError, anything else unreadable a
+    ValueError naming it (a folder, a pipe or device, bytes that are not UTF-8)."""
+    if not path.exists():
+        raise FileNotFoundError(f"{what} not found: {path}")
+    if path.is_dir():
+        raise ValueError(f"{path}: a folder, expected a {kind} {what}")
+    if not path.is_file():      # a pipe or a device would block or never end
+        raise ValueError(f"{path}: not a regular file, expected a {kind} {what}")
+    try:
+        return path.read_bytes().decode("utf-8")
+    except UnicodeDecodeError as error:
+        raise ValueError(f"{path}: not a {kind} {what} (not UTF-8 text: {error.reason} at "
+                         f"byte {error.start})") from None
+
+
 def read_json(path: str | Path, what: str = "file") -> Any:
     """A JSON document from a file; every way it can be unreadable is a ValueError naming it
     (FileNotFoundError when it is not there)."""
     path = Path(path)
-    if not path.exists():
-        raise FileNotFoundError(f"{what} not found: {path}")
-    if path.is_dir():
-        raise ValueError(f"{path}: a folder, expected a JSON {what}")
-    if not path.is_file():      # a pipe or a device would block or never end
-        raise ValueError(f"{path}: not a regular file, expected a JSON {what}")
+    text = _text(path, "JSON", what)
     try:
-        return json.loads(path.read_bytes().decode("utf-8"))
-    except UnicodeDecodeError as error:
-        raise ValueError(f"{path}: not a JSON {what} (not UTF-8 text: {error.reason} at byte "
-                         f"{error.start})") from None
+        return json.loads(text)
     except json.JSONDecodeError as error:
         raise ValueError(f"{path}: not valid JSON ({error})") from None
     except RecursionError:
@@ -100,17 +108,9 @@ def read_toml(path: str | Path, what: str = "file") -> dict:
     import tomllib
 
     path = Path(path)
-    if not path.exists():
-        raise FileNotFoundError(f"{what} not found: {path}")
-    if path.is_dir():
-        raise ValueError(f"{path}: a folder, expected a TOML {what}")
-    if not path.is_file():      # a pipe or a device would block or never end
-        raise ValueError(f"{path}: not a regular file, expected a TOML {what}")
+    text = _text(path, "TOML", what)
     try:
-        return tomllib.loads(path.read_bytes().decode("utf-8"))
-    except UnicodeDecodeError as error:
-        raise ValueError(f"{path}: not a TOML {what} (not UTF-8 text: {error.reason} at byte "
-                         f"{error.start})") from None
+        return tomllib.loads(text)
     except tomllib.TOMLDecodeError as error:
         raise ValueError(f"{path}: not valid TOML ({error})") from None
     except RecursionError:

@@ -47,10 +47,10 @@ def run_on_small_disk(argv: list[str], *, disk: Path, size_kb: int, keep: Path |
     """Run `python -m mop ARGV` with a fresh tmpfs of `size_kb` KB mounted on `disk` (visible to
     that process only). `setup`: shell lines run once the disk is mounted. `prefill`: the disk
     is full before mop starts. `fill_when_exists`: a path under `disk`; once it exists and mop
-    has printed "GO" (and a second later) the disk's files are copied to `snapshot` (what was there just before
-    the fault) and the rest of the disk is filled with zeros while mop runs, so the fault comes
-    mid-work. Afterwards the filler is removed and the disk's files are copied to `keep` (the
-    tmpfs vanishes with the namespace)."""
+    has printed "GO" (and a second later) the disk's files are copied to `snapshot` (what was
+    there just before the fault) and the rest of the disk is filled with zeros while mop runs,
+    so the fault comes mid-work. Afterwards the filler is removed and the disk's files are
+    copied to `keep` (the tmpfs vanishes with the namespace)."""
     prefix = small_disk_prefix()
     if prefix is None:
         raise RuntimeError("no private mount namespace available")

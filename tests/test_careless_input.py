@@ -234,3 +234,14 @@ def test_a_pipe_in_place_of_a_file_is_named_not_waited_on(tmp_path, capsys):
     assert main(["puppet", str(DATA / "momo.png"), "--motion", str(tmp_path / "motion.json"),
                  "--out", str(tmp_path / "x.mp4")]) == 1
     assert "not a regular file" in capsys.readouterr().err
+
+
+def test_a_still_past_the_end_of_the_show_is_an_error(tmp_path, capsys):
+    from test_faults import SMALL_SESSION
+    session = tmp_path / "small.toml"
+    session.write_text(SMALL_SESSION)
+    code = main(["demo", "--session", str(session), "--quiet", "--out", "/dev/null",
+                 "--still", str(tmp_path / "still.png"), "--still-at", "3000"])
+    assert code == 1
+    assert "--still-at 3000: the session ended at" in capsys.readouterr().err
+    assert not (tmp_path / "still.png").exists()

@@ -5,7 +5,7 @@ from pathlib import Path
 
 
 def register(subparsers) -> None:
-    from mop.commands._args import whole_rate
+    from mop.commands._args import MAX_FRAMES, whole_rate
 
     parser = subparsers.add_parser(
         "plot", help="draw a follower trace of a take to a PNG",
@@ -23,6 +23,8 @@ def register(subparsers) -> None:
                         help="the take store when no session is given (default: the demo's)")
     parser.add_argument("--fps", type=whole_rate, default=25,
                         help="follower rate without a session (default 25)")
+    parser.add_argument("--max-frames", type=int, default=MAX_FRAMES, metavar="N",
+                        help=f"refuse takes that give more frames (default {MAX_FRAMES:,})")
     parser.add_argument("--out", default=None, metavar="PNG",
                         help="output picture (default: TAKE-trace.png)")
     parser.set_defaults(func=run)
@@ -96,10 +98,13 @@ def follow(bank, values, actions):
 
 
 def run(args) -> int:
+    from mop.commands._args import check_frame_budget
     from mop.session.build import resample
 
     bank, fps, channels, shift, scale, actions, target = bank_for(args)
     index = [target.channels.index(c) for c in channels]
+    span = float(target.times[-1] - target.times[0]) if len(target.times) > 1 else 0.0
+    check_frame_budget(int(span * fps) + 1, fps=fps, limit=args.max_frames)
     raw = resample(target.times, target.values[:, index], fps)
     trace = follow(bank, (raw - shift) / scale, actions)
     out = Path(args.out) if args.out else Path(f"{args.take}-trace.png")

@@ -607,10 +607,13 @@ def check_wal_belongs(path: str | os.PathLike) -> None:
     except sqlite3.Error:
         through = None
     hint = "it was not applied; `mop takes repair` (or capture.store.repair) moves it aside"
-    if through is None or through[0] != alone[0]:
+    if through is None:
+        raise StoreError(f"{wal} does not fit {path}: read together they are no readable take "
+                         f"store (a WAL from another file, or an older copy of its own); {hint}",
+                         path=path)
+    if through[0] != alone[0]:
         raise StoreError(f"{wal} does not belong to {path}: it holds another take store's "
-                         f"pages (store {through[0] if through else 'unreadable'}, the file is "
-                         f"{alone[0]}); {hint}", path=path)
+                         f"pages (store {through[0]}, the file is {alone[0]}); {hint}", path=path)
     if through[1] < alone[1]:
         raise StoreError(f"{wal} is older than {path} itself (commit {through[1]}, the file "
                          f"holds {alone[1]}): applying it would take recorded frames away; "
@@ -676,9 +679,12 @@ def repair(path: str | os.PathLike) -> list[str]:
         salvaged = error.salvaged
         if salvaged is None:
             raise
+        # written aside first and renamed: a repair killed midway leaves the original as it was
+        fresh = _free_name(Path(f"{path}.salvaged"))
+        write_contents(fresh, salvaged)
         kept = _free_name(Path(f"{path}.damaged"))
         os.replace(path, kept)
-        write_contents(path, salvaged)
+        os.replace(fresh, path)
         done.append(f"salvaged {_salvage_summary(salvaged)} into a new file; the damaged "
                     f"original is kept as {kept.name}")
     return done

@@ -20,7 +20,7 @@ from mop.commands._args import CommandError
 
 # exceptions that mean "the input was wrong", printed as their message alone; any other type
 # is a fault in mop or in a library, printed with its type name so it can be reported
-_USER_ERRORS = (ValueError, TypeError, OSError, KeyError, LookupError)
+_USER_ERRORS = (ValueError, TypeError, OSError, KeyError)
 
 
 def build_parser() -> argparse.ArgumentParser:

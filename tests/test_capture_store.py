@@ -2,6 +2,7 @@
 foreign / damaged / newer files with clear errors and salvage."""
 import sqlite3
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -164,3 +165,52 @@ def test_a_truncated_file_salvages_its_beginning(tmp_path, rng):
         index = np.searchsorted(times, rescued.times)
         np.testing.assert_array_equal(values[index], rescued.values)
         assert rescued.times.size < 6000
+
+
+def test_repair_salvages_a_damaged_file_and_keeps_the_original(tmp_path, rng):
+    from capture.store import repair
+    path = tmp_path / "damaged.sqlite"
+    times, values = write_sample(path, rng, frames=6000, width=8)
+    data = bytearray(path.read_bytes())
+    middle = len(data) // 4096 // 2
+    data[middle * 4096:(middle + 2) * 4096] = rng.integers(0, 256, 8192, np.uint8).tobytes()
+    path.write_bytes(bytes(data))
+    done = repair(path)
+    assert len(done) == 1 and "damaged.sqlite.damaged" in done[0]
+    assert (tmp_path / "damaged.sqlite.damaged").read_bytes() == bytes(data)
+    mended = read_store(path)                     # reads without error now
+    rescued = mended.streams["action"]
+    assert 0 < rescued.times.size < 6000
+    index = np.searchsorted(times, rescued.times)
+    np.testing.assert_array_equal(values[index], rescued.values)
+    assert repair(path) == []                     # healthy now
+    assert not list(tmp_path.glob("*.salvaged*"))
+
+
+def test_an_older_copy_of_a_stores_own_wal_is_refused(tmp_path):
+    """A WAL copied away early and put back after the file moved on would take frames away."""
+    import shutil
+    import subprocess
+    import sys
+
+    from capture.store import check_wal_belongs
+    path = tmp_path / "live.sqlite"
+    script = (
+        "import sys, time, os, shutil\n"
+        "from capture.store import StoreWriter\n"
+        "w = StoreWriter(sys.argv[1], checkpoint_interval=0.3)\n"
+        "w.add_stream('a', ['x'])\n"
+        "for i in range(40):\n"
+        "    w.append('a', i * 0.01, [i]); time.sleep(0.01)\n"
+        "w.flush(); shutil.copy(sys.argv[1] + '-wal', sys.argv[1] + '.early-wal')\n"
+        "for i in range(40, 200):\n"
+        "    w.append('a', i * 0.01, [i]); time.sleep(0.01)\n"
+        "w.flush(); time.sleep(0.5)\n"
+        "os._exit(0)\n")                          # dies without closing, like kill -9
+    env = {**__import__("os").environ, "PYTHONPATH": str(Path(__file__).resolve().parents[1])}
+    subprocess.run([sys.executable, "-c", script, str(path)], check=True, env=env)
+    shutil.copy(f"{path}.early-wal", f"{path}-wal")
+    with pytest.raises(StoreError, match="is older than|does not fit"):
+        check_wal_belongs(path)
+    with pytest.raises(StoreError, match="takes repair"):
+        read_store(path)

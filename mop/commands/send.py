@@ -41,7 +41,10 @@ def run(args) -> int:
     host, port = parse_host_port(args.to, key="--to")
     if not args.address.startswith("/"):
         raise ValueError(f"--address must start with '/', got {args.address!r}")
-    client = UDPClient(host, port)
+    try:
+        client = UDPClient(host, port)
+    except OSError as error:        # e.g. a host name that does not resolve
+        raise OSError(f"--to {host}:{port}: {error.strerror or error}") from None
     stop = []
     signal.signal(signal.SIGTERM, lambda *_: stop.append(True))
     sent = 0

@@ -253,12 +253,12 @@ class StoreWriter:
             raise
         # the main file holds the schema and the id from the start (a copy without the WAL
         # is a take, not "tables: none")
-        self._checkpoint(strict=True)
+        self._checkpoint(self._db, strict=True)
 
-    def _checkpoint(self, *, strict: bool = False) -> None:
+    def _checkpoint(self, db: sqlite3.Connection, *, strict: bool = False) -> None:
         """Copy the WAL's committed pages into the main file (PASSIVE: never waits)."""
         try:
-            busy, _, _ = self._db.execute("PRAGMA wal_checkpoint(PASSIVE)").fetchone()
+            busy, _, _ = db.execute("PRAGMA wal_checkpoint(PASSIVE)").fetchone()
         except sqlite3.Error as error:
             if strict:
                 raise
@@ -435,16 +435,25 @@ class StoreWriter:
         self._last_commit = done
 
     def _flush_loop(self) -> None:
-        while not self._stop.wait(self.commit_interval):
-            try:
-                self.flush()
-            except BaseException as error:   # disk full, file removed: report on next call
-                log.info("take store %s: commit failed: %s", self.path, error)
-                self._error = error
-                return
-            if time.monotonic() - self._last_checkpoint >= self.checkpoint_interval:
-                with self._db_lock:
-                    self._checkpoint()
+        checkpointer = None
+        try:
+            while not self._stop.wait(self.commit_interval):
+                try:
+                    self.flush()
+                except BaseException as error:   # disk full, file removed: report next call
+                    log.info("take store %s: commit failed: %s", self.path, error)
+                    self._error = error
+                    return
+                if time.monotonic() - self._last_checkpoint >= self.checkpoint_interval:
+                    # on a connection of its own and without the writer's lock: commits go on
+                    # (from the appending thread) while pages are copied and synced
+                    if checkpointer is None:
+                        checkpointer = sqlite3.connect(str(self.path), isolation_level=None,
+                                                       timeout=0)
+                    self._checkpoint(checkpointer)
+        finally:
+            if checkpointer is not None:
+                checkpointer.close()
 
     # -- end --------------------------------------------------------------------------------
     def close(self, *, complete: bool = True) -> None:

@@ -70,8 +70,10 @@ def _video_command(kind: str, out: Path, tmp_path: Path) -> list[str]:
 
 
 @needs_small_disk
-@pytest.mark.parametrize("kind, suffix", [("puppet", ".mp4"), ("puppet", ".mkv"),
-                                          ("perform", ".mp4"), ("demo", ".mkv")])
+@pytest.mark.parametrize("kind, suffix", [
+    ("puppet", ".mp4"), ("puppet", ".mkv"),
+    pytest.param("perform", ".mp4", marks=pytest.mark.slow),
+    pytest.param("demo", ".mkv", marks=pytest.mark.slow)])
 def test_a_full_disk_during_video_output_is_an_error_naming_the_file(kind, suffix, tmp_path):
     disk = tmp_path / "disk"
     out = disk / f"out{suffix}"
@@ -176,6 +178,7 @@ def _kill_recording_midway(folder: Path, name: str, seconds: float) -> int:
     return process.wait()
 
 
+@pytest.mark.slow
 def test_kill_9_then_copying_only_the_sqlite_keeps_all_but_the_last_second(tmp_path):
     import shutil
 
@@ -204,6 +207,7 @@ def test_kill_9_then_copying_only_the_sqlite_keeps_all_but_the_last_second(tmp_p
     assert "captured of the planned 4.00 s" in show.stdout
 
 
+@pytest.mark.slow
 def test_a_stale_wal_beside_another_take_is_detected_and_moved_aside(tmp_path):
     import shutil
 
@@ -298,6 +302,7 @@ def _junk_bundles() -> list[bytes]:
             head + b"\x00\x00\x00\x10/glove\x00\x00,fffff\x00\x00"]  # arguments missing
 
 
+@pytest.mark.slow
 def test_a_flood_of_malformed_bundles_loses_no_good_frame(tmp_path):
     import numpy as np
 
@@ -348,6 +353,7 @@ def _listen_performer_actions(port: int, stop, actions: list) -> None:
                     actions.append(timed.message.params[1])
 
 
+@pytest.mark.slow
 @pytest.mark.xfail(reason="the follower bank still takes absurd values for an action; the "
                           "bank's outlier rejection removes this mark", strict=False)
 @pytest.mark.parametrize("value", [1e6, -50.0])

@@ -185,6 +185,7 @@ def _mutations(path: Path, rng: np.random.Generator):
     yield "nul", text.encode().replace(b"\n", b"\x00\n", 3)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("label, shipped, reader", READERS, ids=[r[0] for r in READERS])
 def test_a_reader_raises_only_clear_errors_on_mutated_files(label, shipped, reader, tmp_path,
                                                              seed):

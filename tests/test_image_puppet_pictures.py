@@ -43,6 +43,7 @@ def _silhouettes(rng, height, width):
 
 @pytest.mark.realdata
 @pytest.mark.parametrize("name", TEST_PHOTOS)
+@pytest.mark.slow
 def test_photo_on_a_background_lit_unevenly(name, rng):
     """Brightness varying 25-50 % across the picture, sensor noise, JPEG at 65-80: IoU >= 0.95
     for every silhouette (a flat-colour key found 0.36-0.43 here)."""
@@ -76,6 +77,7 @@ def test_shadow_on_the_background_stays_background(rng):
 
 
 @pytest.mark.realdata
+@pytest.mark.slow
 def test_large_photo_keeps_a_smooth_full_size_edge(rng):
     """A 3000x2000 photo is analysed on a smaller copy: its mask comes back at full size with
     the silhouette's edge, not the small copy's pixel steps."""
@@ -100,6 +102,7 @@ def test_large_photo_keeps_a_smooth_full_size_edge(rng):
 # --- pen drawings on paper ------------------------------------------------------------------
 
 @pytest.mark.parametrize("ink", ["black", "blue", "red", "green", "brown", "violet"])
+@pytest.mark.slow
 def test_pen_drawing_becomes_a_filled_silhouette(ink, rng):
     """Outlines with unfilled insides and details drawn inside, 2-5 px lines, on paper with
     a vignette, noise and JPEG: IoU >= 0.92 to the outline filled out to the stroke's outer
@@ -116,6 +119,7 @@ def test_pen_drawing_becomes_a_filled_silhouette(ink, rng):
         assert np.all(cutout.mask[details]), (kind, "a detail fell outside the puppet")
 
 
+@pytest.mark.slow
 def test_small_gaps_are_closed_an_open_outline_says_where(rng, caplog):
     outline = kit.outline_shape(rng, "bear", 400, 400)
     for gap in (4, 8):

@@ -2,11 +2,12 @@
 level or inside a function, parsed with `ast`):
 
 - `capture`, `followers` and `characters` never import each other, nor `mop`;
-- inside a package, a low module never imports a higher one (LAYERS below: kernels and data
-  types low, builders and the CLI high; a module of a package not named there is free to import
-  downward and is never imported upward by a named one);
-- the three puppet kinds never import each other; inside a kind, only its runtime `puppet`
-  composes the builders (nothing else in the kind imports it);
+- every module has a place in LAYERS below (kernels and data types low, builders and the CLI
+  high; a package's `__init__` is its facade and has none), and a low module never imports a
+  higher one: a new module is added to LAYERS at its level, or this test names it;
+- the puppet kinds (every package under `characters/` with a `puppet` module) never import
+  each other; inside a kind, only its runtime `puppet` composes the builders (nothing else in
+  the kind imports it);
 - a plain `import capture / followers / characters` loads none of the heavy libraries.
 """
 import ast
@@ -19,7 +20,9 @@ import pytest
 ROOT = Path(__file__).resolve().parent.parent
 PACKAGES = ("capture", "followers", "characters", "mop")
 LIBRARIES = ("capture", "followers", "characters")
-KINDS = ("characters.image", "characters.latex", "characters.medial")
+#: the puppet kinds: every package under characters/ that has a runtime `puppet.py`
+KINDS = tuple(sorted(f"characters.{path.parent.name}"
+                     for path in (ROOT / "characters").glob("*/puppet.py")))
 
 # Lowest first. A module (or a package prefix ending in ".*") of one layer may import modules
 # of its own layer and of the layers before it, never of the layers after it.
@@ -42,20 +45,20 @@ LAYERS = {
         ["followers.confusion"],
     ],
     "characters": [
-        ["characters.kernels"],
+        ["characters.kernels", "characters.sidecar"],
         ["characters.model", "characters.control", "characters.motion", "characters.materials",
          "characters.constraints"],
         ["characters.integrators", "characters.puppet"],
-        ["characters.image.*", "characters.latex.*", "characters.medial.*"],
+        [f"{kind}.*" for kind in KINDS],
         ["characters.assets.*"],
     ],
     "mop": [
-        ["mop.export", "mop.render.compose", "mop.takes", "mop.session.config",
+        ["mop.export", "mop.render.compose", "mop.sidecars", "mop.takes", "mop.session.config",
          "mop.session.timing", "mop.session.feeds"],
         ["mop.render.image2d", "mop.render.scene3d", "mop.session.loop", "mop.session.outputs",
          "mop.session.preview", "mop.session.puppets", "mop.session.worker"],
         ["mop.session.build"],
-        ["mop.commands.*", "mop.cli"],
+        ["mop.commands.*", "mop.cli", "mop.__main__"],
     ],
 }
 
@@ -165,6 +168,19 @@ def test_the_layers_name_modules_that_exist():
             for entry in layer:
                 name = entry[:-2] if entry.endswith(".*") else entry
                 assert name in MODULES, f"LAYERS names {entry}, which is not a module"
+
+
+def test_every_module_has_a_layer():
+    facades = {name for name, path in MODULES.items() if path.name == "__init__.py"}
+    missing = sorted(name for name in MODULES if name not in facades and _layer(name) is None)
+    assert not missing, (
+        "modules without a layer; add each to LAYERS[package] in tests/test_layout.py at its "
+        "level (low: kernels, data types, configuration; high: builders, commands): "
+        + ", ".join(missing))
+
+
+def test_the_three_kinds_are_found():
+    assert KINDS == ("characters.image", "characters.latex", "characters.medial")
 
 
 def test_puppet_kinds_are_siblings_and_their_runtime_is_on_top(graph):

@@ -1,5 +1,8 @@
 """Every puppet kind, and the session's test stand-in, has the shape `characters.Puppet` names;
-the session builds every kind a session file may name through its registry."""
+the session builds every kind a session file may name through its registry, and every kind
+package under `characters/` is one a session file may name."""
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -53,6 +56,14 @@ def test_something_without_step_is_not_a_puppet():
             return np.zeros((3, 3))
 
     assert not isinstance(Statue(), Puppet)
+
+
+def test_every_kind_package_is_one_a_session_may_name():
+    import characters
+    packages = {path.parent.name for path in Path(characters.__file__).parent.glob("*/puppet.py")}
+    assert packages == {kind.value for kind in CharacterKind}, (
+        "a package under characters/ with a puppet.py is a puppet kind: name it in "
+        "mop.session.config.CharacterKind and register its builder in mop.session.puppets")
 
 
 def test_every_kind_a_session_may_name_has_one_builder():

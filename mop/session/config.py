@@ -49,7 +49,8 @@ _COLOUR = re.compile(r"^#[0-9a-fA-F]{6}$")
 
 
 class CharacterKind(str, enum.Enum):
-    """The three puppet kinds of `characters`."""
+    """The puppet kinds a session file may name: one per package under `characters/`, each with
+    a builder registered in `mop.session.puppets` (tests/test_puppet_kinds.py checks both)."""
     IMAGE = "image"
     LATEX = "latex"
     MEDIAL = "medial"

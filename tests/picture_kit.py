@@ -252,9 +252,9 @@ def _union_outline(rng, kind, height, width) -> np.ndarray:
 
 def star(rng, size=400, points=5):
     """(mask (size, size) bool, tips (points, 2) float [px]): a star with sharp tips."""
-    centre = np.array([size / 2, size / 2]) + rng.uniform(-0.05, 0.05, 2) * size
+    centre = np.array([size / 2, size / 2]) + rng.uniform(-0.04, 0.04, 2) * size
     start = rng.uniform(0, 2 * np.pi)
-    outer, inner = rng.uniform(0.38, 0.44) * size, rng.uniform(0.14, 0.2) * size
+    outer, inner = rng.uniform(0.36, 0.42) * size, rng.uniform(0.14, 0.2) * size
     angles = start + np.arange(2 * points) * np.pi / points
     radii = np.where(np.arange(2 * points) % 2 == 0, outer, inner)
     polygon = centre + radii[:, None] * np.stack([np.cos(angles), np.sin(angles)], 1)

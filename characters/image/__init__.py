@@ -7,6 +7,7 @@
 - light.py: the background as a smooth light field fitted robustly to the border, residual
   threshold, shadows on the background, GrabCut edge refinement
 - drawing.py: pen drawings: ink out to half its contrast, small gaps closed, outline filled
+- skeleton.py: automatic pins: the silhouette's skeleton, limb tips and a body anchor
 - mesh.py: mask -> contour -> regular grid triangle mesh (even-odd rule + border cells), springs
 - arap.py: two-step as-rigid-as-possible deformation (Igarashi et al. 2005), factorised per pin set
 - guard.py: a constraint that keeps mass-spring triangles from folding over

@@ -55,6 +55,7 @@ from .background import load_image, remove_background, require_cv2, shrink_any
 from .bake import BakedMotion, bake_motion
 from .guard import NoFoldConstraint
 from .mesh import GridMesh, build_grid_mesh, signed_areas
+from .skeleton import ProposedPin, propose_pins
 
 log = logging.getLogger(__name__)
 
@@ -357,6 +358,34 @@ class ImagePuppet:
                                  minlength=len(self.vertices))
             self._neighbour_lists = np.split(others, np.cumsum(counts)[:-1])
         return self._neighbour_lists
+
+    def propose_pins(self) -> list[ProposedPin]:
+        """Pins from the silhouette's skeleton (characters/image/skeleton.py): an anchor
+        `body` (fixed) where the body is, and a driven pin at each limb's tip, named by where
+        it points: `top`, `bottom_1`, `left`, ... Nothing is added; see `add_auto_pins`."""
+        return propose_pins(self.mask)
+
+    def add_auto_pins(self) -> list[str]:
+        """Add the proposed pins (`propose_pins`); returns their names, the anchor first.
+
+        A pin holds a patch of at most 1.5 cells, less when another pin is near (a third of
+        the distance between them), so that nearby limbs (a horse's front hooves) keep pins
+        of their own; a limb too close to another pin even so is left out (logged)."""
+        proposed = self.propose_pins()
+        points = np.array([pin.xy for pin in proposed])
+        added = []
+        for index, pin in enumerate(proposed):
+            others = np.delete(points, index, axis=0)
+            nearest = np.linalg.norm(others - points[index], axis=1).min() if len(others) \
+                else np.inf
+            radius = min(DEFAULT_PIN_RADIUS * self.cell_size, nearest / 3.0)
+            try:
+                self.add_pin(pin.xy, name=pin.name, fixed=pin.fixed, radius=radius)
+            except ValueError as error:
+                log.info("automatic pin %s left out: %s", pin.name, error)
+                continue
+            added.append(pin.name)
+        return added
 
     def remove_pin(self, name: str) -> None:
         if name not in self.pins:

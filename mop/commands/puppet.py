@@ -1,8 +1,11 @@
 """`mop puppet IMAGE --motion MOTION --out OUT`: turn a picture into an elastic puppet, play a
 motion on its pins and write the rendered frames (MP4, MKV, GIF or PNG sequence).
 
-Pins come from --pins PINS.json, else from a "pins" section inside the motion file, else from a
-sidecar IMAGE.pins.json next to the picture. A pins file is
+Pins come from --auto-pins (proposed from the silhouette's skeleton: a `body` anchor and a pin
+at each limb's tip, named by where it points: `top`, `left_1`, ...), else from --pins
+PINS.json, else from a "pins" section inside the motion file, else from a sidecar
+IMAGE.pins.json next to the picture. `--show-mesh` alone draws the mesh with the pins
+--auto-pins would use. A pins file is
 {"pins": {"hand": {"xy": [x, y]}, "feet": {"xy": [x, y], "fixed": true}}} in picture pixels
 ({"hand": [x, y]} is accepted too). Motion channels name driven pins and give their positions in
 picture pixels over time (characters.Motion JSON).
@@ -21,15 +24,27 @@ def register(subparsers) -> None:
         "puppet", help="animate a picture as an elastic puppet and render it",
         description="Animate a picture of a character as an elastic 2D puppet: background "
                     "removal, a triangle mesh, pins driven by a motion, texture-mapped frames.")
-    parser.add_argument("image", type=Path, help="picture of a character (PNG/JPEG; a plain "
-                        "background or an alpha channel)")
+    parser.add_argument("image", type=Path, help="picture of a character: a cut-out with "
+                        "alpha, a photo on a plain or unevenly lit background, or a pen "
+                        "drawing on paper")
     parser.add_argument("--motion", type=Path, help="motion JSON whose channels drive the pins")
     parser.add_argument("--out", type=Path, help="output: .mp4, .mkv (lossless), .avi, .webm, "
                         ".gif, or a folder / name_%%05d.png for PNG frames with alpha")
-    parser.add_argument("--show-mesh", type=Path, metavar="PNG",
-                        help="also save a picture of the mesh and pins over the image")
+    parser.add_argument("--show-mesh", type=Path, metavar="PNG", nargs="?", const=True,
+                        help="also save a picture of the mesh and pins over the image "
+                             "(default name: IMAGE.mesh.png in the current folder)")
     parser.add_argument("--pins", type=Path, metavar="PINS.json",
                         help="pin positions (default: the motion's 'pins', or IMAGE.pins.json)")
+    parser.add_argument("--auto-pins", action="store_true",
+                        help="pins proposed from the silhouette: a fixed 'body' anchor and a "
+                             "driven pin at each limb's tip (top, bottom_1, left, ...)")
+    parser.add_argument("--kind", choices=("auto", "alpha", "plain", "photo", "drawing"),
+                        default="auto", help="how to find the character: its alpha channel, "
+                        "a plain background colour, a photo's unevenly lit background, a pen "
+                        "drawing's outline (default: decided from the picture)")
+    parser.add_argument("--close-gaps", type=positive, default=None, metavar="PX",
+                        help="close gaps in a drawing's outline up to this wide (default: "
+                             "three stroke widths)")
     parser.add_argument("--material", default="rubber",
                         help="liquid, fabric, rubber (default) or rigid")
     parser.add_argument("--mode", choices=("springs", "arap"), default="springs",
@@ -80,38 +95,54 @@ def run(args) -> int:
         raise ValueError("--out needs --motion MOTION.json to know how the pins move")
     if not args.fps > 0:
         raise ValueError(f"--fps must be > 0, got {args.fps}")
+    if args.auto_pins and args.pins is not None:
+        raise ValueError("give either --auto-pins or --pins PINS.json, not both")
 
     motion = None
     pins = None
     if args.motion is not None:
         motion = Motion.load(args.motion)
         data = read_json(args.motion, "motion file")
-        if isinstance(data, dict) and "pins" in data:
+        if isinstance(data, dict) and "pins" in data and not args.auto_pins:
             pins = parse_pins(data["pins"], f"{args.motion}: pins")
     if args.pins is not None:
         pins = load_pins(args.pins)
-    if pins is None:
+    if pins is None and not args.auto_pins:
         sidecar = args.image.with_name(args.image.stem + ".pins.json")
         if sidecar.exists():
             pins = load_pins(sidecar)
-    if pins is None and motion is not None and motion.channel_names:
+    if pins is None and not args.auto_pins and motion is not None and motion.channel_names:
         raise ValueError(f"the motion drives pins {motion.channel_names} but no pin positions "
-                         f"were given: use --pins PINS.json, a 'pins' section in the motion "
-                         f"file, or {args.image.stem}.pins.json next to the image")
+                         f"were given: use --auto-pins, --pins PINS.json, a 'pins' section in "
+                         f"the motion file, or {args.image.stem}.pins.json next to the image")
 
     started = time.perf_counter()
     puppet = ImagePuppet.from_image(args.image, cell_size=args.cell_size,
                                     tolerance=args.tolerance, material=args.material,
-                                    mode=args.mode)
+                                    mode=args.mode, kind=args.kind,
+                                    close_gaps=args.close_gaps)
     for name, pin in (pins or {}).items():
         puppet.add_pin(pin["xy"], name=name, fixed=pin["fixed"])
+    proposed = pins is None and (args.auto_pins or args.out is None)
+    if proposed:
+        puppet.add_auto_pins()
     height, width = puppet.mask.shape
-    print(f"built {puppet} in {time.perf_counter() - started:.2f} s")
+    print(f"built {puppet} in {time.perf_counter() - started:.2f} s (found as {puppet.kind})")
+    for note in puppet.notes:
+        print(f"note: {note}")
+    if proposed:
+        listed = ", ".join(f"{name} ({pin.requested[0]:.0f}, {pin.requested[1]:.0f})"
+                           + (" fixed" if pin.fixed else "")
+                           for name, pin in puppet.pins.items())
+        print(f"{'automatic pins' if args.auto_pins else 'pins --auto-pins would use'}: "
+              f"{listed}")
 
     if args.show_mesh is not None:
-        args.show_mesh.parent.mkdir(parents=True, exist_ok=True)
-        Image.fromarray(puppet_preview(puppet)).save(args.show_mesh)
-        print(f"wrote mesh preview {args.show_mesh}")
+        path = (Path(args.image.stem + ".mesh.png") if args.show_mesh is True
+                else args.show_mesh)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        Image.fromarray(puppet_preview(puppet)).save(path)
+        print(f"wrote mesh preview {path}")
     if args.out is None:
         return 0
 

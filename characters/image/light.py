@@ -30,6 +30,7 @@ NOISE_MULTIPLE = 5.4       # threshold = this x the median residual of backgroun
 THRESHOLD_FLOOR = 12.0     # ... but at least this [0..255 RGB distance]
 EDGE_BAND = 6              # [px] GrabCut decides this far either side of the first edge
 GRABCUT_ITERATIONS = 2
+GRABCUT_SEED = 1           # OpenCV's random generator, reset before each GrabCut
 SHADOW_DARKEST = 0.35      # a shadow keeps at least this fraction of the background's light
 SHADOW_HUE = 0.06          # and its colour's direction within this (chromaticity distance)
 SHADOW_TEXTURE = 3.0       # and is as smooth as the background: within 3 x its noise
@@ -232,6 +233,9 @@ def refine_edge(rgb: np.ndarray, background: np.ndarray, mask: np.ndarray, *,
     if not ((window == cv2.GC_PR_FGD) | (window == cv2.GC_FGD)).any() or \
             not ((window == cv2.GC_PR_BGD) | (window == cv2.GC_BGD)).any():
         return mask.copy()
+    # GrabCut seeds its colour models with k-means on OpenCV's global random generator: a
+    # fixed seed makes the same picture give the same puppet whatever ran before
+    cv2.setRNGSeed(GRABCUT_SEED)
     background_model = np.zeros((1, 65), np.float64)
     foreground_model = np.zeros((1, 65), np.float64)
     cv2.grabCut(np.ascontiguousarray(flat[top:bottom, left:right]), window, None,

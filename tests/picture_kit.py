@@ -17,6 +17,13 @@ import io
 import numpy as np
 
 PHOTOS = ("astronaut", "coffee", "chelsea", "rocket", "motorcycle_left", "grace_hopper")
+# the cut-out's numbers were chosen on these photographs and outline shapes only ...
+TUNING_PHOTOS = ("rocket", "motorcycle_left", "grace_hopper")
+TUNING_OUTLINES = ("blob", "star", "pear", "ghost")
+# ... and are checked on these as well, which were not used for choosing
+HELD_OUT_PHOTOS = ("astronaut", "coffee", "chelsea")
+HELD_OUT_OUTLINES = ("bear", "fish")
+INK_NAMES = ("black", "blue", "red", "green", "brown", "violet")
 
 
 def photo(name: str) -> np.ndarray:
@@ -87,6 +94,24 @@ def creature(rng, height, width) -> np.ndarray:
         cv2.ellipse(mask, tuple(np.round(mid).astype(int)),
                     (int(length / 2), int(rng.uniform(0.03, 0.05) * size)), angle, 0, 360, 1, -1)
     return mask.astype(bool)
+
+
+def backdrop_colour(rng) -> np.ndarray:
+    """(3,) float: a background colour of any hue, from greys to saturated, not too dark."""
+    import colorsys
+    hue, saturation, value = rng.uniform(0, 1), rng.uniform(0.0, 0.9), rng.uniform(0.4, 0.95)
+    return np.array(colorsys.hsv_to_rgb(hue, saturation, value)) * 255
+
+
+def silhouettes(rng, height, width):
+    """(name, (H, W) bool) for three kinds of silhouette: a creature, a blob, a star."""
+    yield "creature", creature(rng, height, width)
+    yield "blob", _fill(blob(rng, height, width), height, width)
+    shape, _ = star(rng, min(height, width))
+    canvas = np.zeros((height, width), bool)
+    top, left = (height - shape.shape[0]) // 2, (width - shape.shape[1]) // 2
+    canvas[top:top + shape.shape[0], left:left + shape.shape[1]] = shape
+    yield "star", canvas
 
 
 def lighting(rng, height, width, *, gradient: float) -> np.ndarray:
@@ -285,6 +310,28 @@ def stick_figure(rng, size=400, thickness=None):
         direction = (end - start) / np.linalg.norm(end - start)
         tips.append(end + direction * t / 2)
     return mask.astype(bool), np.array(tips)
+
+
+# scikit-image's horse silhouette (328x400): the tips of its limbs, read off the picture as
+# the lowest point of each hoof, the lowest point of the tail, the front of the muzzle
+HORSE_TIPS = np.array([(65, 311), (125.5, 304), (256.5, 309), (280.5, 312),   # hooves
+                       (31, 251), (388, 86)])                                 # tail, muzzle
+
+
+def horse() -> np.ndarray:
+    """(328, 400) bool: scikit-image's horse silhouette (the horse True)."""
+    from skimage import data
+    return ~data.horse().astype(bool)
+
+
+def worst_tip(pins, mask, tips) -> float:
+    """The largest distance from a known limb tip (K, 2) [px] to its nearest driven pin of
+    `pins` (ProposedPin list), as a fraction of the figure's size."""
+    ys, xs = np.nonzero(mask)
+    size = float(max(np.ptp(xs), np.ptp(ys)) + 1)
+    driven = np.array([pin.xy for pin in pins if not pin.fixed])
+    distance = np.linalg.norm(np.asarray(tips)[:, None] - driven[None], axis=2).min(axis=1)
+    return float(distance.max() / size)
 
 
 def iou(a: np.ndarray, b: np.ndarray) -> float:

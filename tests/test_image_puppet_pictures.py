@@ -6,7 +6,6 @@ was tuned on other photographs (rocket, motorcycle_left, grace_hopper) and other
 photographs tested here (astronaut, coffee, chelsea) and the drawing shapes 'bear' and 'fish'
 were not used for tuning.
 """
-import colorsys
 import io
 
 import numpy as np
@@ -20,38 +19,20 @@ from characters.image.background import (ANALYSIS_SIZE, PictureKind, load_image,
 cv2 = pytest.importorskip("cv2")
 pytest.importorskip("skimage")
 
-TEST_PHOTOS = ("astronaut", "coffee", "chelsea")
-
-
-def _random_backdrop(rng):
-    """A background colour of any hue, from greys to saturated, not too dark."""
-    hue, saturation, value = rng.uniform(0, 1), rng.uniform(0.0, 0.9), rng.uniform(0.4, 0.95)
-    return np.array(colorsys.hsv_to_rgb(hue, saturation, value)) * 255
-
-
-def _silhouettes(rng, height, width):
-    yield "creature", kit.creature(rng, height, width)
-    yield "blob", kit._fill(kit.blob(rng, height, width), height, width)
-    star, _ = kit.star(rng, min(height, width))
-    canvas = np.zeros((height, width), bool)
-    top, left = (height - star.shape[0]) // 2, (width - star.shape[1]) // 2
-    canvas[top:top + star.shape[0], left:left + star.shape[1]] = star
-    yield "star", canvas
-
 
 # --- photographs under uneven light -----------------------------------------------------------
 
 @pytest.mark.realdata
-@pytest.mark.parametrize("name", TEST_PHOTOS)
+@pytest.mark.parametrize("name", kit.HELD_OUT_PHOTOS)
 @pytest.mark.slow
 def test_photo_on_a_background_lit_unevenly(name, rng):
     """Brightness varying 25-50 % across the picture, sensor noise, JPEG at 65-80: IoU >= 0.95
     for every silhouette (a flat-colour key found 0.36-0.43 here)."""
     photo = kit.photo(name)
     height, width = photo.shape[:2]
-    for shape_name, truth in _silhouettes(rng, height, width):
+    for shape_name, truth in kit.silhouettes(rng, height, width):
         picture = kit.photo_on_background(
-            rng, photo, truth, colour=_random_backdrop(rng), gradient=rng.uniform(0.25, 0.5),
+            rng, photo, truth, colour=kit.backdrop_colour(rng), gradient=rng.uniform(0.25, 0.5),
             noise=rng.uniform(3, 8), quality=int(rng.integers(65, 81)))
         cutout = remove_background(picture)
         assert cutout.kind is PictureKind.PHOTO
@@ -101,14 +82,14 @@ def test_large_photo_keeps_a_smooth_full_size_edge(rng):
 
 # --- pen drawings on paper ------------------------------------------------------------------
 
-@pytest.mark.parametrize("ink", ["black", "blue", "red", "green", "brown", "violet"])
+@pytest.mark.parametrize("ink", kit.INK_NAMES)
 @pytest.mark.slow
 def test_pen_drawing_becomes_a_filled_silhouette(ink, rng):
     """Outlines with unfilled insides and details drawn inside, 2-5 px lines, on paper with
     a vignette, noise and JPEG: IoU >= 0.92 to the outline filled out to the stroke's outer
     edge, and every detail inside the puppet (a flat-colour key made the whole sheet the
     puppet: IoU 0.21)."""
-    for kind in ("blob", "star", "pear", "ghost", "bear", "fish"):
+    for kind in kit.TUNING_OUTLINES + kit.HELD_OUT_OUTLINES:
         outline = kit.outline_shape(rng, kind, 400, 400)
         picture, truth, details = kit.pen_drawing(
             rng, 400, 400, outline=outline, ink=ink, line_width=int(rng.integers(2, 6)),

@@ -11,22 +11,8 @@ from characters.image.skeleton import propose_pins
 
 cv2 = pytest.importorskip("cv2")
 
-# scikit-image's horse silhouette (328x400): the tips of its limbs, read off the picture as
-# the lowest point of each hoof, the lowest point of the tail, the front of the muzzle
-HORSE_TIPS = np.array([(65, 311), (125.5, 304), (256.5, 309), (280.5, 312),   # hooves
-                       (31, 251), (388, 86)])                                 # tail, muzzle
-
-
-def _figure_size(mask) -> float:
-    ys, xs = np.nonzero(mask)
-    return float(max(np.ptp(xs), np.ptp(ys)) + 1)
-
-
 def _worst_tip(mask, tips) -> float:
-    """The largest distance from a known limb tip to its nearest driven pin, over the size."""
-    driven = np.array([pin.xy for pin in propose_pins(mask) if not pin.fixed])
-    distance = np.linalg.norm(np.asarray(tips)[:, None] - driven[None], axis=2).min(axis=1)
-    return float(distance.max() / _figure_size(mask))
+    return kit.worst_tip(propose_pins(mask), mask, tips)
 
 
 def test_every_star_point_and_stick_limb_gets_a_pin(rng):
@@ -42,9 +28,9 @@ def test_every_star_point_and_stick_limb_gets_a_pin(rng):
 @pytest.mark.parametrize("scale", [0.5, 1.0, 2.5])
 @pytest.mark.parametrize("flip", [False, True], ids=["facing right", "facing left"])
 def test_every_horse_limb_gets_a_pin(scale, flip):
-    data = pytest.importorskip("skimage.data")
-    horse = ~data.horse().astype(bool)
-    tips = (HORSE_TIPS + 0.5) * scale - 0.5
+    pytest.importorskip("skimage")
+    horse = kit.horse()
+    tips = (kit.HORSE_TIPS + 0.5) * scale - 0.5
     horse = cv2.resize(horse.astype(np.uint8), None, fx=scale, fy=scale,
                        interpolation=cv2.INTER_NEAREST) > 0
     if flip:

@@ -587,8 +587,9 @@ def _write_csv(path: Path, header: Sequence[str], rows: np.ndarray) -> None:
 def performer_templates(store: TakeStore, performer: str, *, rate: float,
                         channels: Sequence[str] | None = None,
                         exclude: Sequence[str] = ()) -> dict[str, np.ndarray]:
-    """{take name: (T, D) aligned action} of every complete take of `performer` whose action
-    channels equal `channels` (default: those of the first take found), sampled at `rate`."""
+    """{take name: (T, D) aligned action} of every complete demonstration of `performer` (a
+    take with a motion; show takes are performances, not demonstrations) whose action channels
+    equal `channels` (default: those of the first take found), sampled at `rate`."""
     templates: dict[str, np.ndarray] = {}
     for info in store.list(performer=performer):
         if info.name in exclude or not info.complete or info.problem:
@@ -599,7 +600,7 @@ def performer_templates(store: TakeStore, performer: str, *, rate: float,
             take = store.load(info.name)
         except (TakeError, KeyError):
             continue
-        if take.times.size < 2:
+        if take.times.size < 2 or take.motion is None:
             continue
         channels = take.channels
         templates[info.name] = take.aligned(rate)[1]

@@ -158,8 +158,11 @@ def test_action_names_after_and_sources_beside_the_session_file(tmp_path):
     wave = config.actions[1]
     assert wave.action == "hello" and wave.after.value == "hold"
     assert config.actions[0].action == "open" and config.actions[0].after.value == "rest"
-    # a camera index, a missing file and other kinds stay as given
-    other = GOOD.replace('source = "osc:127.0.0.1:9000/hand"', 'source = "camera:0:aruco"')
-    assert load_session(write(tmp_path, other)).performers[1].source == "camera:0:aruco"
+    # a missing file too (its error then names where it was looked for); a camera index, a
+    # profile name and other kinds stay as given
     missing = GOOD.replace('source = "osc:127.0.0.1:9000/hand"', 'source = "camera:gone.mp4"')
-    assert load_session(write(tmp_path, missing)).performers[1].source == "camera:gone.mp4"
+    assert load_session(write(tmp_path, missing)).performers[1].source == (
+        f"camera:{(tmp_path / 'gone.mp4').resolve()}")
+    for spec in ("camera:0:aruco", "hid:p5", "hid:generic@/dev/hidraw3", "osc:127.0.0.1:9/x"):
+        other = GOOD.replace('source = "osc:127.0.0.1:9000/hand"', f'source = "{spec}"')
+        assert load_session(write(tmp_path, other)).performers[1].source == spec

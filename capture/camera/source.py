@@ -2,13 +2,16 @@
 
 A device index is a live camera: frames are stamped when grabbed, and a camera that stops
 delivering is reopened. A video file stands in for a camera: by default it plays at its own
-frame rate (realtime=True); with realtime=False it is read as fast as the tracker goes, without
-dropping a frame (tests, offline processing). At the end a file ends the source (or loops).
+frame rate (realtime=True), from the moment its first frame is asked for (`read`), not when it
+is opened, so a session's build or a countdown does not eat its beginning; with realtime=False
+it is read as fast as the tracker goes, without dropping a frame (tests, offline processing).
+At the end a file ends the source (or loops).
 """
 from __future__ import annotations
 
 import logging
 import os
+import threading
 from pathlib import Path
 
 import numpy as np
@@ -60,6 +63,8 @@ class CameraSource(ThreadedSource):
         self.frame_size: tuple[int, int] | None = None
         self._index = 0
         self._started_at = 0.0
+        self._asked = threading.Event()      # a file in real time plays once a frame is asked for
+        self._waiting = False
         _cv2()
         self._start(wait=wait)
 
@@ -93,10 +98,16 @@ class CameraSource(ThreadedSource):
         self._capture = capture
         self._index = 0
         self._started_at = self.clock.now()
+        self._waiting = self.is_file and self.realtime
 
     def _pump(self, timeout: float) -> None:
         cv2 = _cv2()
         capture = self._capture
+        if self._waiting:
+            if not self._asked.wait(timeout):
+                return
+            self._waiting = False
+            self._started_at = self.clock.now()
         if self.is_file and self.realtime:
             due = self._started_at + self._index / self.rate
             if not self.clock.sleep_until(due, self._stop):
@@ -119,6 +130,10 @@ class CameraSource(ThreadedSource):
         self._image = image
         self._index += 1
         self._emit(t, np.asarray(self.tracker.process(image), dtype=np.float64))
+
+    def read(self, timeout: float | None = None):
+        self._asked.set()
+        return super().read(timeout)
 
     def _close_device(self) -> None:
         capture, self._capture = self._capture, None

@@ -23,6 +23,9 @@ def register(subparsers) -> None:
                         help="also serve the live preview page (0 = any free port); implies "
                              "real time")
     parser.add_argument("--realtime", action="store_true", help="play in real time")
+    parser.add_argument("--transparent", action="store_true",
+                        help="draw on a transparent background (a PNG folder --out keeps the "
+                             "alpha)")
     parser.add_argument("--still", default=None, metavar="PNG",
                         help="also save one frame as a PNG (see --still-at)")
     parser.add_argument("--still-at", type=seconds_or_zero, default=4.0, metavar="SECONDS",
@@ -74,7 +77,7 @@ def run(args) -> int:
     if args.still:
         extra.append(StillOutput(Path(args.still), args.still_at, config.fps))
     live = args.realtime or args.preview is not None
-    overrides = Overrides(video=args.out, preview=args.preview)
+    overrides = Overrides(video=args.out, preview=args.preview, transparent=args.transparent)
     session, report, interrupted = perform(
         config, mode=Mode.LIVE if live else Mode.REPLAY, overrides=overrides, quiet=args.quiet,
         extra_outputs=extra)

@@ -5,6 +5,8 @@ import signal
 import sys
 import time
 
+from . import count
+
 
 def register(subparsers) -> None:
     from mop.commands._args import MAX_FRAMES, port, seconds
@@ -28,9 +30,13 @@ def register(subparsers) -> None:
     parser.add_argument("--duration", type=seconds, default=None, metavar="SECONDS",
                         help="stop after this much session time")
     parser.add_argument("--out", default=None, metavar="PATH",
-                        help="video file (.mp4, .mkv, .gif) or a folder for PNG frames with alpha")
+                        help="video file (.mp4, .mkv, .avi, .webm, .gif) or a folder for PNG "
+                             "frames (with alpha: --transparent)")
     parser.add_argument("--png", default=None, metavar="FOLDER",
-                        help="also write a PNG sequence with alpha")
+                        help="also write a PNG sequence (frame N = session frame N)")
+    parser.add_argument("--transparent", action="store_true",
+                        help="draw on a transparent background: PNG frames keep the alpha "
+                             "(a video gets the session's background colour)")
     parser.add_argument("--preview", type=port, default=None, metavar="PORT",
                         help="serve the live preview page on this port (0 = any free port)")
     parser.add_argument("--preview-host", default=None, metavar="HOST",
@@ -87,6 +93,9 @@ def perform(config, *, mode, overrides, duration=None, quiet=False, out=sys.stde
 
     def progress(current):
         now = time.monotonic()
+        if current.frame_index == 1:
+            say(f"the show is on (warm-up {current.warmup_seconds:.1f} s)")
+            last[0] = now
         if not quiet and now - last[0] >= 1.0:
             last[0] = now
             states = ", ".join(f"{name} {p['status']}:{p['action'] or 'rest'}"
@@ -98,8 +107,9 @@ def perform(config, *, mode, overrides, duration=None, quiet=False, out=sys.stde
     previous_int = signal.signal(signal.SIGINT, on_interrupt)
     previous_usr1 = signal.signal(signal.SIGUSR1, on_report) if hasattr(signal, "SIGUSR1") else None
     try:
-        say(f"performing {config.name}: {len(config.performers)} performers, "
-            f"{len(config.characters)} characters, {session.mode.value} mode, {config.fps} fps")
+        say(f"performing {config.name}: {count(len(config.performers), 'performer')}, "
+            f"{count(len(config.characters), 'character')}, {session.mode_label}, "
+            f"{config.fps} fps")
         report = session.run(duration=duration, progress=progress)
     finally:
         signal.signal(signal.SIGINT, previous_int)
@@ -143,7 +153,8 @@ def run(args) -> int:
     out = args.out
     overrides = Overrides(replay=replay, video=out, png=args.png, osc=osc,
                           preview=args.preview, preview_host=args.preview_host,
-                          loop_takes=args.loop, render=not args.no_render)
+                          loop_takes=args.loop, render=not args.no_render,
+                          transparent=args.transparent)
     session, report, interrupted = perform(config, mode=mode, overrides=overrides,
                                            duration=args.duration, quiet=args.quiet)
     if interrupted:

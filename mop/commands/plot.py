@@ -118,7 +118,8 @@ def run(args) -> int:
     return 0
 
 
-def draw(path: Path, title, raw, channels, trace, actions, fps) -> None:
+def draw(path: Path, title, raw, channels, trace, actions, fps) -> list[list[str]]:
+    """Draw the trace to `path`; returns each panel's legend entries (top to bottom)."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -146,13 +147,19 @@ def draw(path: Path, title, raw, channels, trace, actions, fps) -> None:
     axes[1].legend(loc="upper right", fontsize=8)
     for action in actions:
         axes[2].plot(t, trace["posterior"][action], color=colours[action], lw=1.2, label=action)
-        axes[3].plot(t, trace["log_likelihood"][action], color=colours[action], lw=1.2)
+        axes[3].plot(t, trace["log_likelihood"][action], color=colours[action], lw=1.2,
+                     label=action)
     axes[2].set_ylabel("posterior")
     axes[2].set_ylim(-0.05, 1.05)
+    axes[2].legend(loc="upper right", fontsize=8, ncol=min(len(actions), 4))
     axes[3].set_ylabel("log-likelihood")
+    axes[3].legend(loc="lower left", fontsize=8, ncol=min(len(actions), 4))
     axes[3].set_xlabel("time [s]")
     figure.suptitle(f"follower trace of {title}")
     figure.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
     figure.savefig(path, dpi=100)
+    legends = [[text.get_text() for text in axis.get_legend().get_texts()]
+               if axis.get_legend() is not None else [] for axis in axes]
     plt.close(figure)
+    return legends

@@ -1,5 +1,6 @@
 """`mop record`: record a demonstration: the performer acts along with a motion while their
-input is captured; the action-motion pair is stored as a take.
+input is captured; the action-motion pair is stored as a take. `--show` records a show take
+instead: a performance with no motion paired, for `mop perform --replay` and sessions.
 
 Headless: the motion "plays" as a countdown and a progress bar in the terminal, and a preview
 video of the motion (its channels as curves with a moving cursor) is written with OpenCV, to
@@ -15,6 +16,8 @@ import re
 import sys
 from pathlib import Path
 
+from . import count
+
 PREVIEW_SIZE = (640, 360)
 PREVIEW_FPS = 25
 MAX_TAKE_SECONDS = 600.0    # a demonstration is seconds long; a longer motion is a mistake
@@ -28,12 +31,19 @@ def register(subparsers) -> None:
         description="Plays a motion (countdown and progress in the terminal, plus a preview "
                     "video), captures the performer's source for the motion's duration, "
                     "time-aligns action and motion, stores the take, and reports how confusable "
-                    "the new action is with the performer's other takes.")
+                    "the new action is with the performer's other takes. With --show: records "
+                    "a show take (a performance, no motion) for --duration or until Ctrl-C.")
     parser.add_argument("--performer", required=True, help="who performs")
-    parser.add_argument("--action", required=True, help="the action's name (e.g. wave)")
-    parser.add_argument("--motion", required=True, metavar="MOTION",
+    parser.add_argument("--action", default=None,
+                        help="the action's name (e.g. wave; default 'show' with --show)")
+    parser.add_argument("--motion", default=None, metavar="MOTION",
                         help="the motion to act along with: a motion .json file, or the name of "
                              "a take whose motion to reuse")
+    parser.add_argument("--show", action="store_true",
+                        help="record a show take: a whole performance, no motion, no "
+                             "confusability report (replay it with mop perform --replay)")
+    parser.add_argument("--duration", type=float, default=None, metavar="SECONDS",
+                        help="length of a --show take (default: until Ctrl-C)")
     parser.add_argument("--source", required=True, metavar="SPEC",
                         help="what to capture, e.g. hid:p5, camera:0:aruco, "
                              "osc:127.0.0.1:9000/glove, replay:recordings/NAME")
@@ -176,12 +186,14 @@ def _load_motion(spec: str, store):
                             f"{store.path}")
 
 
-def _progress(action: str, duration: float):
-    """A bar over the take's seconds, with the frame count and the source's status after it:
-    redrawn in place on a terminal, a line per second in a log."""
+def _progress(action: str, duration: float | None):
+    """A bar over the take's seconds (the seconds so far when it runs until Ctrl-C), with the
+    frame count and the source's status after it: redrawn in place on a terminal, a line per
+    second in a log."""
     from tqdm import tqdm
-    return tqdm(total=duration, desc=f"  {action}", file=sys.stdout,
-                bar_format="{desc} [{bar:30}] {n:5.2f} / {total:.2f} s  {postfix}",
+    bar = ("{desc} [{bar:30}] {n:5.2f} / {total:.2f} s  {postfix}" if duration is not None
+           else "{desc} {n:7.2f} s (Ctrl-C ends the take)  {postfix}")
+    return tqdm(total=duration, desc=f"  {action}", file=sys.stdout, bar_format=bar,
                 mininterval=0.1 if sys.stdout.isatty() else 1.0)
 
 
@@ -208,17 +220,26 @@ def _storage_failure(error: OSError, recorder) -> Exception:
                         f"takes show {recorder.name}`)")
 
 
-def _record(args) -> int:
-    from capture import open_source
-    from mop.takes import TakeStore, check_name, performer_templates
-
+def _plan(args, store) -> tuple:
+    """(motion or None, duration [s] or None = until Ctrl-C, preview path or None) from the
+    arguments, checked before anything is opened."""
     if not args.rate > 0:
         raise ValueError(f"--rate must be > 0 Hz, got {args.rate}")
     if args.countdown < 0:
         raise ValueError(f"--countdown must be >= 0 s, got {args.countdown}")
-    if args.name:
-        check_name(args.name)
-    store = TakeStore(args.recordings)
+    if args.show:
+        if args.motion is not None:
+            raise ValueError("--show records a performance without a motion: leave out --motion")
+        duration = args.duration
+        if duration is not None and not (duration > 0 and duration < float("inf")):
+            raise ValueError(f"--duration must be a number of seconds > 0, got {duration}")
+        return None, duration, None
+    if args.motion is None:
+        raise ValueError("--motion: give the motion to act along with (a motion .json file or "
+                         "a take's name), or --show to record a show take without one")
+    if args.duration is not None:
+        raise ValueError("--duration is for --show takes: a demonstration lasts as long as "
+                         "its motion")
     motion = _load_motion(args.motion, store)
     duration = float(motion.duration)
     if not duration > 0:
@@ -235,8 +256,55 @@ def _record(args) -> int:
         safe = re.sub(r"[^A-Za-z0-9._-]+", "_", args.action).strip("._-") or "action"
         preview = Path(args.preview or f"out/preview-{safe}.mp4")
         write_motion_preview(motion, preview)
-        print(f"motion preview: {preview} ({duration:.2f} s, {len(motion.channel_names)} "
-              f"channels) - play it beside you while recording")
+        print(f"motion preview: {preview} ({duration:.2f} s, "
+              f"{count(len(motion.channel_names), 'channel')}) - play it beside you while "
+              f"recording")
+    return motion, duration, preview
+
+
+def _capture(source, recorder, start: float, duration: float | None, label: str) -> None:
+    """Append the frames of [start, start + duration] (or until Ctrl-C when duration is None)
+    to the recorder, with a progress bar."""
+    clock = source.clock
+    end = start + duration if duration is not None else float("inf")
+    with _progress(label, duration) as progress:
+        try:
+            while (now := clock.now()) < end:
+                frame = source.read(timeout=min(0.05, max(end - now, 0.001)))
+                if frame is not None and start <= frame.t <= end:
+                    recorder.append_frame(frame, channels=source.channels)
+                elif frame is None and duration is None and source.ended:
+                    end = clock.now()      # a file or a take played to its end ends the show
+                    break
+                elapsed = clock.now() - start
+                progress.set_postfix_str(f"frames {recorder.frames}  {source.status.value}",
+                                         refresh=False)
+                progress.n = min(elapsed, duration or elapsed)   # set, not summed: no drift
+                progress.update(0)
+        except KeyboardInterrupt:
+            if duration is not None:
+                raise
+            end = clock.now()             # a show recorded until Ctrl-C ends here
+        # frames that arrived by the end but were still queued
+        while (frame := source.read(timeout=0)) is not None:
+            if start <= frame.t <= end:
+                recorder.append_frame(frame, channels=source.channels)
+        progress.set_postfix_str(f"frames {recorder.frames}", refresh=False)
+        progress.n = duration if duration is not None else end - start
+        progress.refresh()
+
+
+def _record(args) -> int:
+    from capture import open_source
+    from mop.takes import TakeStore, check_name, performer_templates
+
+    action = args.action or ("show" if args.show else None)
+    if not action:
+        raise ValueError("--action: name the action (e.g. wave)")
+    if args.name:
+        check_name(args.name)
+    store = TakeStore(args.recordings)
+    motion, duration, preview = _plan(args, store)
 
     source = open_source(args.source)
     recorder = None
@@ -246,14 +314,14 @@ def _record(args) -> int:
         if first is None:
             raise OSError(f"{args.source}: no frame within {args.wait:g} s (status "
                           f"{source.status.value}); is the performer's input running?")
-        print(f"source {args.source}: {len(source.channels)} channels "
-              f"({', '.join(source.channels[:8])}{', ...' if len(source.channels) > 8 else ''})")
+        names = ", ".join(source.channels[:8]) + (", ..." if len(source.channels) > 8 else "")
+        print(f"source {args.source}: {count(len(source.channels), 'channel')} ({names})")
         end_countdown = clock.now() + args.countdown
         shown = None
         while (left := end_countdown - clock.now()) > 0:
             second = int(left) + 1
             if second != shown:
-                print(f"  {args.action} starts in {second}...", flush=True)
+                print(f"  {action} starts in {second}...", flush=True)
                 shown = second
             source.read(timeout=min(left, 0.05))   # keep the queue fresh; frames not kept
         while source.read(timeout=0) is not None:
@@ -264,41 +332,29 @@ def _record(args) -> int:
         calibration = {key: info[key] for key in ("camera_matrix", "dist_coeffs",
                                                   "marker_length", "units", "frame_size")
                        if info.get(key) is not None}
-        recorder = store.record(performer=args.performer, action=args.action,
+        extra = {"show": True} if args.show else {"preview": str(preview) if preview else None}
+        recorder = store.record(performer=args.performer, action=action,
                                 channels=source.channels or None, motion=motion,
                                 rate=args.rate, device=args.source, device_info=info,
                                 calibration=calibration, stream_rate=source.rate,
-                                name=args.name, start=start,
-                                extra={"preview": str(preview) if preview else None})
-        print(f"  GO - recording {recorder.name} for {duration:.2f} s", flush=True)
-        end = start + duration
-        with _progress(args.action, duration) as progress:
-            while (now := clock.now()) < end:
-                frame = source.read(timeout=min(0.05, max(end - now, 0.001)))
-                if frame is not None and start <= frame.t <= end:
-                    recorder.append_frame(frame, channels=source.channels)
-                elapsed = min(clock.now() - start, duration)
-                progress.set_postfix_str(f"frames {recorder.frames}  {source.status.value}",
-                                         refresh=False)
-                progress.update(elapsed - progress.n)
-            # frames that arrived by the end but were still queued
-            while (frame := source.read(timeout=0)) is not None:
-                if start <= frame.t <= end:
-                    recorder.append_frame(frame, channels=source.channels)
-            progress.set_postfix_str(f"frames {recorder.frames}", refresh=False)
-            progress.update(duration - progress.n)
+                                name=args.name, start=start, extra=extra)
+        length = f"for {duration:.2f} s" if duration is not None else "until Ctrl-C"
+        print(f"  GO - recording {recorder.name} {length}", flush=True)
+        _capture(source, recorder, start, duration, action)
         stats = source.stats
-        # time alignment (MOP 3.1.3): the captured interval [0, duration] of the recorder's
-        # clock is what pairs with the whole motion; Take.aligned() normalises it
-        alignment = {"method": "duration", "action_start": 0.0, "action_end": duration,
-                     "motion_duration": duration}
         recorder.update(source_stats={"frames": stats.frames, "dropped": stats.dropped,
                                       "malformed": stats.malformed,
                                       "nan_values": stats.nan_values})
         if recorder.frames < 2:
             recorder.discard()
-            raise OSError(f"{args.source}: only {recorder.frames} frame(s) arrived during the "
-                          f"{duration:.2f} s take; nothing stored")
+            raise OSError(f"{args.source}: only {count(recorder.frames, 'frame')} arrived "
+                          f"during the take; nothing stored")
+        # time alignment (MOP 3.1.3): the captured interval [0, duration] of the recorder's
+        # clock is what pairs with the whole motion; Take.aligned() normalises it. A show take
+        # pairs with nothing.
+        alignment = None if motion is None else {
+            "method": "duration", "action_start": 0.0, "action_end": duration,
+            "motion_duration": duration}
         name = recorder.finish(alignment=alignment)
     except BaseException as error:
         if recorder is not None:
@@ -315,9 +371,14 @@ def _record(args) -> int:
 
     take = store.load(name)
     missing = int(take.values.size - (take.values == take.values).sum())
-    print(f"stored take {name}: {take.times.size} frames, {len(take.channels)} channels, "
-          f"{missing} missing values, {stats.malformed} malformed inputs skipped, "
+    print(f"stored take {name}: {count(take.times.size, 'frame')} "
+          f"({take.times[-1] - take.times[0]:.2f} s), {count(len(take.channels), 'channel')}, "
+          f"{count(missing, 'missing value')}, {stats.malformed} malformed inputs skipped, "
           f"{stats.dropped} dropped -> {store.file(name)}")
+    if motion is None:
+        print(f"a show take: replay it with `mop perform SESSION --replay "
+              f"{args.performer}=replay:{store.file(name)}`")
+        return 0
     templates = performer_templates(store, args.performer, rate=args.rate,
                                     channels=take.channels)
     templates[name] = take.aligned(args.rate)[1]

@@ -84,6 +84,8 @@ def _show(store, args) -> int:
     import numpy as np
 
     from mop.takes import TakeError
+
+    from . import count
     try:
         take = store.load(args.name, salvage=args.salvage)
     except KeyError:
@@ -108,8 +110,9 @@ def _show(store, args) -> int:
         n = stream.times.size
         span = float(stream.times[-1] - stream.times[0]) if n > 1 else 0.0
         missing = int(np.count_nonzero(np.isnan(stream.values)))
-        print(f"  stream {name!r}: {n} frames over {span:.3f} s ({stream.rate:g} Hz nominal), "
-              f"{len(stream.channels)} channels, {missing} missing values")
+        rate = f"{stream.rate:g} Hz nominal" if stream.rate > 0 else "rate not known"
+        print(f"  stream {name!r}: {count(n, 'frame')} over {span:.3f} s ({rate}), "
+              f"{count(len(stream.channels), 'channel')}, {count(missing, 'missing value')}")
         for column, channel in enumerate(stream.channels):
             values = stream.values[:, column] if n else np.zeros(0)
             finite = values[np.isfinite(values)]
@@ -119,10 +122,10 @@ def _show(store, args) -> int:
             else:
                 print(f"      {channel:<18} (no value)")
     if take.motion is not None:
-        print(f"  motion      {len(take.motion.channel_names)} channels, "
+        print(f"  motion      {count(len(take.motion.channel_names), 'channel')}, "
               f"{take.motion.duration:.3f} s: {', '.join(take.motion.channel_names)}")
     else:
-        print("  motion      none")
+        print("  motion      none (a show take: a performance, not a demonstration)")
     if take.alignment:
         print("  alignment   " + ", ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}"
                                            for k, v in take.alignment.items()))

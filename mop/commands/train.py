@@ -33,11 +33,22 @@ def run(args) -> int:
     import numpy as np
 
     from mop.session import load_session
-    from mop.session.build import build_bank, open_store, performer_templates, take_data
+    from mop.session.build import (build_bank, build_characters, open_store,
+                                   performer_templates, session_takes)
+
+    from . import count
 
     config = load_session(args.session)
     store = open_store(config.takes)
-    takes = {a.take: take_data(store, a.take) for a in config.actions}
+    takes = session_takes(config, store)
+    # the bindings are checked on the characters as `mop perform` checks them
+    for character in build_characters(config, takes):
+        close = getattr(character.renderer, "close", None)
+        if close is not None:
+            close()
+        print(f"character {character.name}: " + ("; ".join(
+            f"{track.performer} drives {', '.join(sorted(track.targets))}"
+            for track in character.tracks) or "driven by no action"))
     results = []
     for performer in config.performers:
         templates, channels, _, _ = performer_templates(config, performer, takes,
@@ -45,9 +56,9 @@ def run(args) -> int:
         start = time.perf_counter()
         build_bank(templates, performer)
         seconds = time.perf_counter() - start
-        print(f"performer {performer.name}: {len(templates)} actions on {len(channels)} channels "
-              f"({', '.join(channels)}), {performer.normalise.value} normalisation, "
-              f"bank built in {1e3 * seconds:.1f} ms")
+        print(f"performer {performer.name}: {count(len(templates), 'action')} on "
+              f"{count(len(channels), 'channel')} ({', '.join(channels)}), "
+              f"{performer.normalise.value} normalisation, bank built in {1e3 * seconds:.1f} ms")
         for name, template in templates.items():
             drives = [a.character for a in config.actions_of(performer.name)
                       if a.action == name]

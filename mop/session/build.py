@@ -32,6 +32,7 @@ class Overrides:
     preview_host: str | None = None
     loop_takes: bool = False
     render: bool = True
+    transparent: bool = False     # draw on a transparent background whatever the file says
 
 
 # --------------------------------------------------------------------------------------------
@@ -164,6 +165,44 @@ def build_character(character: CharacterConfig, *, frame_height: int):
 # the whole session
 
 
+def session_takes(config: SessionConfig, store) -> dict[str, TakeData]:
+    """{take name: TakeData} of every take the session's [[actions]] name."""
+    where = str(config.path) if config.path else "<session>"
+    takes: dict[str, TakeData] = {}
+    for index, action in enumerate(config.actions):
+        if action.take not in takes:
+            takes[action.take] = take_data(store, action.take,
+                                           where=f"{where}: actions[{index}].take: ")
+    return takes
+
+
+def build_characters(config: SessionConfig, takes: Mapping[str, TakeData], *,
+                     characters: Mapping[str, tuple[Any, Any]] | None = None,
+                     say: Callable[[str], None] = lambda text: None) -> list[CharacterRuntime]:
+    """Every character with its tracks, each binding checked on the built puppet: its take
+    has a motion, the motion has the channels, the character has the targets, and each target
+    takes the motion's values (one puppet step per binding, then back to rest). `mop perform`
+    and `mop train` check a session with this same function."""
+    where = str(config.path) if config.path else "<session>"
+    built = []
+    for character in config.characters:
+        if characters is not None and character.name in characters:
+            puppet, renderer = characters[character.name]
+        else:
+            say(f"building {character.kind.value} character {character.name}")
+            puppet, renderer = build_character(character, frame_height=config.size[1])
+        try:
+            tracks = _tracks(config, character, puppet, takes, where=where)
+        except BaseException:
+            close = getattr(renderer, "close", None)
+            if close is not None:
+                close()
+            raise
+        built.append(CharacterRuntime(character.name, puppet, renderer,
+                                      position=character.position, tracks=tracks))
+    return built
+
+
 def build_session(config: SessionConfig, *, mode: Mode | str = Mode.REPLAY,
                   overrides: Overrides | None = None,
                   characters: Mapping[str, tuple[Any, Any]] | None = None,
@@ -179,12 +218,7 @@ def build_session(config: SessionConfig, *, mode: Mode | str = Mode.REPLAY,
     where = str(config.path) if config.path else "<session>"
     say = progress or (lambda text: None)
     store = open_store(config.takes) if store is None else store
-
-    takes: dict[str, TakeData] = {}
-    for index, action in enumerate(config.actions):
-        if action.take not in takes:
-            takes[action.take] = take_data(store, action.take, where=f"{where}: actions[{index}]"
-                                           f".take: ")
+    takes = session_takes(config, store)
 
     performers = []
     for performer in config.performers:
@@ -200,24 +234,13 @@ def build_session(config: SessionConfig, *, mode: Mode | str = Mode.REPLAY,
                                    still_frames=int(round(performer.still_after * config.fps)))
         performers.append(runtime)
 
-    frame_height = config.size[1]
-    built = []
-    for character in config.characters:
-        if characters is not None and character.name in characters:
-            puppet, renderer = characters[character.name]
-        else:
-            say(f"building {character.kind.value} character {character.name}")
-            puppet, renderer = build_character(character, frame_height=frame_height)
-        tracks = _tracks(config, character, puppet, takes, where=where)
-        built.append(CharacterRuntime(character.name, puppet, renderer,
-                                      position=character.position, tracks=tracks))
+    built = build_characters(config, takes, characters=characters, say=say)
 
     stage = None
     if overrides.render:
         from mop.render.compose import Stage
-        background = (None if config.background is Background.TRANSPARENT
+        stage = Stage(config.size, None if _transparent(config, overrides)
                       else config.background_colour)
-        stage = Stage(config.size, background)
 
     outputs = _outputs(config, overrides)
     outputs.extend(extra_outputs)
@@ -290,6 +313,9 @@ def _tracks(config: SessionConfig, character: CharacterConfig, puppet,
                     f"expected each performer on its own channels")
             owner.setdefault(target, (action.performer, index))
         start = motion.sample(0.0)
+        _try_targets(puppet, start, channels, dt=1.0 / config.fps,
+                     what=f"{key}.channels: take {action.take!r}, character "
+                          f"{character.name!r}")
         performer_rest = rest.setdefault(action.performer, {})
         for channel, target in channels:
             performer_rest.setdefault(target, start[channel])
@@ -300,18 +326,61 @@ def _tracks(config: SessionConfig, character: CharacterConfig, puppet,
             for performer, motions in by_performer.items()]
 
 
+def _try_targets(puppet, sample: Mapping[str, np.ndarray], channels, *, dt: float,
+                 what: str) -> None:
+    """Step the puppet once per bound target with the motion's first values, then put it back
+    at rest: a target that cannot take what the motion gives (a bend where a position is
+    expected, say) is refused here, naming the binding, not in the middle of the show."""
+    reset = getattr(puppet, "reset", None)
+    if reset is None:
+        return
+    try:
+        for channel, target in channels:
+            value = np.asarray(sample[channel], dtype=np.float64)
+            given = float(value[0]) if value.size == 1 else value
+            try:
+                puppet.step(dt, {target: given})
+            except (ValueError, TypeError) as error:
+                raise SessionError(f"{what}: motion channel {channel!r} gives {value.size} "
+                                   f"value(s) per frame, which target {target!r} does not "
+                                   f"take: {error}") from None
+    finally:
+        reset()
+
+
+def _transparent(config: SessionConfig, overrides: Overrides) -> bool:
+    return overrides.transparent or config.background is Background.TRANSPARENT
+
+
+VIDEO_SUFFIXES = (".mp4", ".mkv", ".avi", ".webm", ".gif")
+
+
 def _outputs(config: SessionConfig, overrides: Overrides) -> list:
+    """Video and PNG writers (each in a thread of its own), OSC, the preview. PNG frames keep
+    the alpha of a transparent stage; a video has none: it gets the session's colour behind the
+    characters, or black when the file itself says transparent (a warning says so)."""
     from .outputs import BackgroundOutput, OscOutput, PngOutput, VideoOutput
     outputs = []
+    transparent = _transparent(config, overrides)
+    pngs = [overrides.png or config.outputs.png]
     video = overrides.video or config.outputs.video
+    if video and Path(video).suffix.lower() not in VIDEO_SUFFIXES:
+        pngs.insert(0, video)                  # --out FOLDER: a PNG sequence
+        video = None
     if video:
-        background = (config.background_colour if config.background is not
-                      Background.TRANSPARENT else (0, 0, 0))
+        if config.background is Background.TRANSPARENT:
+            log.warning("%s: the session's background is transparent and video has no alpha: "
+                        "the characters are shown over black; write PNG frames (--png FOLDER) "
+                        "to keep the alpha, or set [session] background to a colour", video)
+            background = (0, 0, 0)
+        else:
+            background = config.background_colour
         outputs.append(BackgroundOutput(VideoOutput(video, fps=config.fps, size=config.size,
                                                     background=background)))
-    png = overrides.png or config.outputs.png
-    if png:
-        outputs.append(BackgroundOutput(PngOutput(png, fps=config.fps, size=config.size)))
+    for png in filter(None, pngs):
+        outputs.append(BackgroundOutput(PngOutput(
+            png, fps=config.fps, size=config.size,
+            background=None if transparent else config.background_colour)))
     osc = overrides.osc or config.outputs.osc
     if osc:
         outputs.append(OscOutput(*osc))

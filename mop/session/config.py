@@ -452,25 +452,26 @@ def parse_session(user: Mapping[str, Any], *, where: str = "<session>",
 
 
 def resolve_source(spec: str, base: Path) -> str:
-    """A source spec with a relative file in it (camera:clip.mp4, hid:profile.toml) made
-    absolute against the session file's folder, as assets and takes are; anything else as
-    given (a camera index, a network address, a file that is not there: its error comes when
-    the source opens)."""
+    """A source spec naming a file by a relative path (camera:clip.mp4[:tracker],
+    hid:profiles/glove.toml[@device]) made absolute against the session file's folder, as assets
+    and takes are; anything else as given (a camera index, a profile name, a network address)."""
     kind, sep, rest = spec.partition(":")
     if not sep or kind not in ("camera", "hid") or not rest:
         return spec
     body, mark, query = rest.partition("?")
-    head, colon, tail = body.rpartition(":")
-    for device, suffix in ((body, ""), (head, colon + tail)):
-        if not device or device.isdigit() or Path(device).is_absolute():
-            continue
-        if kind == "hid":
-            device, at, selector = device.partition("@")
-            suffix = at + selector + suffix
-        candidate = base / device
-        if candidate.is_file():
-            return f"{kind}:{candidate.resolve()}{suffix}{mark}{query}"
-    return spec
+    if kind == "camera":
+        head, colon, tail = body.rpartition(":")
+        device, suffix = (head, colon + tail) if colon and tail.isalpha() else (body, "")
+        if not device or device.isdigit():
+            return spec
+    else:
+        device, at, selector = body.partition("@")
+        suffix = at + selector
+        if not (device.endswith(".toml") or "/" in device):
+            return spec                    # a shipped profile's name
+    if Path(device).is_absolute():
+        return spec
+    return f"{kind}:{(base / device).resolve()}{suffix}{mark}{query}"
 
 
 def _check_bindings(where: str, actions: list[ActionBinding]) -> None:

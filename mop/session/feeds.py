@@ -212,7 +212,7 @@ class SourceFeed:
         self.next_retry = -math.inf
         self._history: _History | None = None
         self._out = np.empty(0)
-        self._opened_at = -math.inf
+        self._opened_at: float | None = None
         self._open()
 
     def _open(self) -> None:
@@ -221,7 +221,7 @@ class SourceFeed:
             self.channels = tuple(self.source.channels)
             self.status = SILENT
             self.message = "waiting for the first frame"
-            self._opened_at = self.clock()
+            self._opened_at = None      # silence counts from the first frame that asks
             self._unlock()
         except Exception as error:  # a device may be unplugged at start: keep retrying
             self._fail(error)
@@ -285,6 +285,8 @@ class SourceFeed:
         except Exception as error:  # the source broke: close it, reopen it later
             self._fail(error)
             return None
+        if self._opened_at is None:
+            self._opened_at = due
         history = self._history
         newest = history.last_time() if history is not None and len(history) else -math.inf
         followed = self.latency is not None and due - self.latency > newest

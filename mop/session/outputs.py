@@ -10,6 +10,8 @@ after the simulation (OSC). Both have `close()`.
 from __future__ import annotations
 
 import logging
+import os
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -43,18 +45,32 @@ class VideoOutput:
 
 
 class PngOutput(VideoOutput):
-    """A folder of frame_000000.png ... with alpha (RGBA), through `mop.export.open_writer`.
-    Dropped (repeated) frames are not written again."""
+    """A folder of frame_000000.png ... with alpha (RGBA, unless a `background` colour is given),
+    through `mop.export.open_writer`: file N is session frame N. A repeated (dropped) frame is a
+    hard link to the file before it (a copy where links are not possible): no PNG is encoded
+    twice."""
 
-    def __init__(self, folder: str | Path, *, fps: int, size: tuple[int, int]):
+    def __init__(self, folder: str | Path, *, fps: int, size: tuple[int, int],
+                 background: tuple[int, int, int] | None = None):
         from mop.export import open_writer
         self.folder = Path(folder)
-        self.writer = open_writer(self.folder, fps=fps, size=tuple(size), background=None)
+        self.writer = open_writer(self.folder, fps=fps, size=tuple(size), background=background)
         self.frames = 0
 
     def write(self, frame, state, *, repeat: bool = False) -> None:
-        if not repeat:
+        writer = self.writer
+        if not repeat or writer.frames_written == 0:
             super().write(frame, state)
+            return
+        previous = writer.frame_path(writer.frames_written - 1)
+        target = writer.frame_path(writer.frames_written)
+        target.unlink(missing_ok=True)
+        try:
+            os.link(previous, target)
+        except OSError:
+            shutil.copyfile(previous, target)
+        writer.frames_written += 1
+        self.frames += 1
 
 
 class OscOutput:

@@ -62,10 +62,13 @@ def parse_replay(pairs) -> dict[str, str]:
     return replay
 
 
-def perform(config, *, mode, overrides, duration=None, quiet=False, out=sys.stderr,
+def perform(config, *, mode, overrides, duration=None, quiet=False, out=None,
             extra_outputs=()):
-    """Build and run a session with Ctrl-C and SIGUSR1 handling; returns (report, interrupted)."""
+    """Build and run a session with Ctrl-C and SIGUSR1 handling; returns (report, interrupted).
+    Progress lines go to `out` (default: the sys.stderr of the moment of the call)."""
     from mop.session.build import build_session
+
+    out = sys.stderr if out is None else out
 
     def say(text):
         if not quiet:

@@ -250,7 +250,7 @@ def test_takes_commands(tmp_path, rng, capsys, monkeypatch):
     assert main(["takes", "--recordings", str(folder), "show", name]) == 0
     out = capsys.readouterr().out
     assert "performer   ana" in out and "motion      2 channels, 2.000 s: hand, jaw" in out
-    assert "1 missing values" in out
+    assert "1 missing value" in out
     monkeypatch.chdir(tmp_path)
     assert main(["takes", "--recordings", str(folder), "export", name, "--format", "csv"]) == 0
     assert (tmp_path / f"{name}.csv").is_file() and (tmp_path / f"{name}.aligned.csv").is_file()

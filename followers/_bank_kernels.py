@@ -161,20 +161,26 @@ def _evidence(fstate, bmodel, bstate):
 
 
 @inline
-def _fits(fstate, bmodel, bstate, n_obs, cap):
+def _fits(fstate, bmodel, bstate, n_obs, cap, outlier):
     """The rejection's fit: a forgetful mean (``fit_decay``) of each follower's log-likelihood
     ratio against the background model per observed channel [nats per channel per frame],
     each frame counting at least ``fit_floor``; a frame counts as the better of the follower's
     score and its outline model's less ``outline_fit_margin`` per channel (an irregular
-    repetition its follower loses track of is still the action); minus the pace term."""
-    background = capped_log_density(fstate.xs, fstate.observed, bmodel.background_mean,
-                                    bmodel.background_weight, bmodel.background_log_norm, cap)
+    repetition its follower loses track of is still the action); minus the pace term. A frame
+    with an ``outlier`` channel counts ``fit_floor`` for every action."""
+    background = 0.0
+    if not outlier:
+        background = capped_log_density(fstate.xs, fstate.observed, bmodel.background_mean,
+                                        bmodel.background_weight, bmodel.background_log_norm,
+                                        cap)
     bstate.fit_weight[0] = bmodel.fit_decay * bstate.fit_weight[0] + 1.0
     inv_w = 1.0 / bstate.fit_weight[0]
     for k in range(bstate.fit.shape[0]):
-        explained = max(fstate.frame_loglik[1, k],
-                        bstate.outline_ll[k] - bmodel.outline_fit_margin * n_obs)
-        per_channel = max((explained - background) / n_obs, bmodel.fit_floor)
+        per_channel = bmodel.fit_floor
+        if not outlier:
+            explained = max(fstate.frame_loglik[1, k],
+                            bstate.outline_ll[k] - bmodel.outline_fit_margin * n_obs)
+            per_channel = max((explained - background) / n_obs, bmodel.fit_floor)
         mean = bstate.likelihood_fit[k]
         bstate.likelihood_fit[k] = mean + (per_channel - mean) * inv_w
         penalty = 0.0
@@ -217,16 +223,18 @@ def _posterior(bstate):
 
 
 @inline
-def _decide(bmodel, bstate, best):
+def _decide(bmodel, bstate, best, outlier):
     """Rejection and switch hysteresis: an action becomes active when its fit reaches its
     threshold plus ``enter_margin``, stays while above the threshold less ``leave_margin``,
     and another one takes over when its evidence is ``switch_margin`` ahead and it may
-    enter."""
+    enter. A frame with an ``outlier`` channel is no action."""
     decision, fit, threshold = bstate.decision, bstate.fit, bmodel.thresholds
     active = decision[0]
     new = active
-    enters = fit[best] >= threshold[best] + bmodel.enter_margin
-    if active >= 0:
+    enters = fit[best] >= threshold[best] + bmodel.enter_margin and not outlier
+    if outlier:
+        new = -1
+    elif active >= 0:
         if fit[active] < threshold[active] - bmodel.leave_margin:
             new = -1
         if best != active and bstate.recent[best] - bstate.recent[active] >= \
@@ -260,17 +268,23 @@ def gate(fstate, bmodel, bstate, shown):
 def decide(fmodel, fstate, bmodel, bstate, n_obs):
     """The bank's decision after its followers and outline models saw a frame."""
     progress_of_all(fmodel, fstate, bstate)
+    outlier = fstate.outliers[0] > 0
+    if outlier:
+        bstate.outlier_frames[0] += 1
     if n_obs > 0:
         if bmodel.pace_weight > 0.0:
             _pace(fmodel, fstate, bmodel, bstate)
         leading = _evidence(fstate, bmodel, bstate)
-        _fits(fstate, bmodel, bstate, n_obs, fmodel.cap)
+        _fits(fstate, bmodel, bstate, n_obs, fmodel.cap, outlier)
         _bound_lead(bmodel, bstate, leading)
+        bstate.decision[2] += 1
+    elif outlier:
+        _fits(fstate, bmodel, bstate, n_obs, fmodel.cap, outlier)
         bstate.decision[2] += 1
     best = _posterior(bstate)
     bstate.decision[1] = best
     if bstate.decision[2] > 0:
-        _decide(bmodel, bstate, best)
+        _decide(bmodel, bstate, best, outlier)
 
 
 @kernel
@@ -302,3 +316,4 @@ def bank_run(fmodel, fstate, bmodel, bstate, X, trace):
             trace.posteriors[n, k] = bstate.posterior[k]
             trace.log_likelihoods[n, k] = fstate.loglik[k]
             trace.fits[n, k] = bstate.fit[k]
+        trace.outlier[n] = fstate.outliers[0] > 0

@@ -32,24 +32,25 @@ from followers._jit import inline, kernel
 
 @inline
 def prepare_frame(model, state, x):
-    """Clean one input frame ``x (D,)`` into ``state.xs`` and ``state.observed``: NaN ->
-    missing (xs 0, observed 0), +-inf and huge values clamped into [lower, upper]. Returns the
-    number of observed channels."""
+    """Clean one input frame ``x (D,)`` into ``state.xs`` and ``state.observed``: NaN is a
+    missing channel (xs 0, observed 0), and so is a value outside [lower, upper] (+-inf, a
+    stuck or absurd sensor: counted in ``state.outliers``). Returns the number of observed
+    channels."""
     lower, upper, xs, observed = model.lower, model.upper, state.xs, state.observed
     count = 0
+    outliers = 0
     for d in range(x.shape[0]):
         v = x[d]
-        if v != v:
-            xs[d] = 0.0
-            observed[d] = 0.0
-        else:
-            if v < lower[d]:
-                v = lower[d]
-            elif v > upper[d]:
-                v = upper[d]
+        if v >= lower[d] and v <= upper[d]:  # False for NaN
             xs[d] = v
             observed[d] = 1.0
             count += 1
+        else:
+            xs[d] = 0.0
+            observed[d] = 0.0
+            if v == v:
+                outliers += 1
+    state.outliers[0] = outliers
     return count
 
 
@@ -445,7 +446,7 @@ def _weigh(model, state, k):
 @inline
 def _normalise(model, state, k, n_obs):
     """Divide both tracks by their total mass c; returns c, or 0 when it is not a positive
-    finite number (unreachable with clamped input): the follower then starts over next
+    finite number (unreachable with bounded input): the follower then starts over next
     frame and says so with a finite, very low likelihood."""
     off, M = model.offsets[k], state.alpha.shape[2]
     rowsum, support, alpha = state.rowsum, state.support, state.alpha

@@ -10,17 +10,26 @@ mechanism costs and buys is measured in ``docs/design/followers.md``.
 """
 from __future__ import annotations
 
+import logging
+import time
 from collections.abc import Mapping
 from typing import NamedTuple
 
 import numpy as np
 
 from followers import _bank_kernels
-from followers.bank_model import bank_sigmas, bank_state, build_bank_model, reset_bank
+from followers.bank_model import (bank_sigmas, bank_state, build_bank_model, check_size,
+                                  reset_bank)
 from followers.config import BankConfig, FollowerConfig
 from followers.defaults import as_sigma, as_template, as_window, default_window
-from followers.follower import adaptation, chain, resolve_config
+from followers.follower import Follower, adaptation, chain, resolve_config
 from followers.model import build_forward, check_frame, forward_state, reset_forward
+
+
+log = logging.getLogger(__name__)
+# a bank of this many templates, or of this many template values (frames x channels), times
+# one step when it is built
+_PROBED = (256, 2_000_000)
 
 
 class BankTrace(NamedTuple):
@@ -33,11 +42,12 @@ class BankTrace(NamedTuple):
     posteriors: np.ndarray       # (N, K): the posterior over actions
     log_likelihoods: np.ndarray  # (N, K): every follower's log-likelihood since reset
     fits: np.ndarray             # (N, K): every action's fit [nats per channel per frame]
+    outlier: np.ndarray          # (N,) bool: a channel far outside the templates' range
 
     @classmethod
     def empty(cls, N: int, K: int) -> BankTrace:
         return cls(np.empty(N, dtype=np.int64), np.empty(N), np.empty(N),
-                   *(np.empty((N, K)) for _ in range(4)))
+                   *(np.empty((N, K)) for _ in range(4)), np.empty(N, dtype=np.bool_))
 
 
 class BankOutput:
@@ -53,14 +63,17 @@ class BankOutput:
     fit : float: that action's recent log-likelihood ratio against the background model [nats
         per channel per frame]; the action is accepted while ``fit >= threshold``
     threshold : float: that action's rejection threshold
+    outlier : bool: a channel of this frame was far outside what the templates span (a stuck
+        or absurd sensor; ``FollowerConfig.outlier_span``): it was left out, and the frame is
+        no action (``bank.outlier_frames`` counts them since reset)
     posterior : dict[str, float]: probability of each action (built on access)
     log_likelihoods : dict[str, float]: every follower's log-likelihood since reset
     """
 
     __slots__ = ("_bank", "action", "index", "best", "progress", "variance", "log_likelihood",
-                 "fit", "threshold", "_frozen")
+                 "fit", "threshold", "outlier", "_frozen")
     _FIELDS = ("action", "index", "best", "progress", "variance", "log_likelihood", "fit",
-               "threshold")
+               "threshold", "outlier")
 
     def __init__(self, bank):
         self._bank = bank
@@ -69,6 +82,7 @@ class BankOutput:
         self.index = -1
         self.best = bank.actions[0]
         self.progress = self.variance = self.log_likelihood = self.fit = self.threshold = 0.0
+        self.outlier = False
 
     @property
     def posterior(self) -> dict[str, float]:
@@ -93,15 +107,16 @@ class BankOutput:
     def __repr__(self) -> str:
         return (f"BankOutput(action={self.action!r}, progress={self.progress:.3f}, "
                 f"variance={self.variance:.2e}, best={self.best!r}, fit={self.fit:.2f}, "
-                f"threshold={self.threshold:.2f})")
+                f"threshold={self.threshold:.2f}, outlier={self.outlier})")
 
 
-def _named_templates(templates) -> tuple[list[str], list[np.ndarray]]:
-    """Names and validated (T_k, D) arrays from a mapping or a sequence of pairs."""
+def _named_templates(templates) -> tuple[list[str], list[np.ndarray], list]:
+    """Names, validated (T_k, D) arrays and each one's own sigma (a ``Follower`` value's
+    given sigma, else None) from a mapping or a sequence of pairs."""
     items = list(templates.items()) if isinstance(templates, Mapping) else list(templates)
     if not items:
         raise ValueError("a FollowerBank needs at least one template, got none")
-    names, arrays = [], []
+    names, arrays, own, seen = [], [], [], set()
     for entry in items:
         if not (isinstance(entry, tuple) and len(entry) == 2):
             raise TypeError("templates must be a mapping {name: (T, D) array} or a sequence of "
@@ -109,16 +124,22 @@ def _named_templates(templates) -> tuple[list[str], list[np.ndarray]]:
         name, template = entry
         if not isinstance(name, str):
             raise TypeError(f"action names must be str, got {name!r}")
-        if name in names:
+        if name in seen:
             raise ValueError(f"action name {name!r} appears twice")
+        seen.add(name)
         names.append(name)
-        arrays.append(as_template(template, name=f"template {name!r}"))
+        if isinstance(template, Follower):
+            arrays.append(np.array(template.template))
+            own.append(template.sigma if template.sigma_given else None)
+        else:
+            arrays.append(as_template(template, name=f"template {name!r}"))
+            own.append(None)
     D = arrays[0].shape[1]
     for name, arr in zip(names, arrays):
         if arr.shape[1] != D:
             raise ValueError(f"every template needs the same channels: {names[0]!r} has {D}, "
                              f"{name!r} has {arr.shape[1]}")
-    return names, arrays
+    return names, arrays, own
 
 
 def _given_sigmas(sigma, names, arrays) -> list[np.ndarray]:
@@ -148,13 +169,16 @@ def resolve_bank_config(config, transitions, reject_margin) -> BankConfig:
 class FollowerBank:
     """Recognises which of several recorded actions a performer is doing, and how far along.
 
-    templates : {name: (T_k, D) float} (or a sequence of (name, template) pairs): one template
-        per action, all with the same D channels [input units].
+    templates : {name: (T_k, D) float or Follower} (or a sequence of (name, value) pairs): one
+        template per action, all with the same D channels [input units]. A ``Follower`` (one
+        from ``train_follower``, say) gives its template and, if it was given one, its
+        per-state sigma as that action's base sigma, floored at the bank's default; the
+        bank's scales apply to it as to the default.
     sigma : float or (D,) for every action, or {name: float, (D,) or (T_k, D)}, optional [input
-        units]: the emission sigma of both the forward recursion and the recognition score.
-        Default: multiples of the default sigma estimated from all templates together
-        (``BankConfig.following_scale``, ``recognition_scale``), with an exact-repetition
-        component in the recognition score.
+        units]: the emission sigma of both the forward recursion and the recognition score,
+        used as given. Default: multiples of each action's base sigma (the default estimated
+        from all templates together; ``BankConfig.following_scale``, ``recognition_scale``),
+        with an exact-repetition component in the recognition score.
     window : int, optional: window half-width p [template frames] for all followers. Default:
         per template, ``followers.defaults.default_window``.
     transitions : as for :class:`followers.Follower`; a name selects
@@ -165,15 +189,16 @@ class FollowerBank:
 
     def __init__(self, templates, *, sigma=None, window=None, transitions=None,
                  reject_margin=None, config: BankConfig | None = None):
-        names, arrays = _named_templates(templates)
+        names, arrays, own = _named_templates(templates)
         self.config = config = resolve_bank_config(config, transitions, reject_margin)
         fc = config.follower
         model = chain(fc, transitions)
+        check_size(arrays, config, levels=model.levels, resolution=model.resolution)
         K = len(arrays)
         defaults = sigma is None
         recognition = exact = None
         if defaults:
-            sigmas, recognition, exact = bank_sigmas(arrays, config)
+            sigmas, recognition, exact = bank_sigmas(arrays, config, own)
             if model.kind == "mop":  # the paper's chain scores frames as the paper does
                 recognition = exact = None
         else:
@@ -187,7 +212,8 @@ class FollowerBank:
         self._transitions = model
         self._forward = build_forward(
             arrays, sigmas, windows, model, cap=fc.outlier_sigmas ** 2, prune=fc.prune_mass,
-            tilt=fc.subframe_tilt, recognition=recognition, exact=exact,
+            tilt=fc.subframe_tilt, outlier_span=fc.outlier_span, recognition=recognition,
+            exact=exact,
             adaptation=adaptation(fc, fc.adapt_sigma and defaults and model.kind != "mop"),
             report_adaptation=adaptation(fc, defaults))
         self._exact = np.ones((K, arrays[0].shape[1])) if exact is None else exact
@@ -198,6 +224,22 @@ class FollowerBank:
         self._bank = bank_state(self._model)
         self._out = BankOutput(self)
         self.reset()
+        if K >= _PROBED[0] or sum(a.size for a in arrays) >= _PROBED[1]:
+            self._probe()
+
+    def _probe(self) -> None:
+        """Time one step of a large bank; say in the log when it is slower than a frame."""
+        x = np.ascontiguousarray(self._templates[0][0])
+        self.step(x)
+        start = time.perf_counter()
+        self.step(x)
+        took = time.perf_counter() - start
+        self.reset()
+        if took > self.config.frame_budget:
+            log.warning("a bank of %d templates takes about %.0f ms per frame, more than the "
+                        "%.0f ms of BankConfig.frame_budget: it cannot follow in real time; "
+                        "use fewer or shorter templates, or fewer channels", len(self._names),
+                        1e3 * took, 1e3 * self.config.frame_budget)
 
     # ---- description ----------------------------------------------------------------------------
     @property
@@ -229,7 +271,7 @@ class FollowerBank:
     @property
     def exact_sigmas(self) -> np.ndarray:
         """(K, D) float [input units]: each action's exact-repetition sigma per channel (its
-        template's own noise, see ``defaults.exact_scale``; unused without a mixture)."""
+        template's own noise, see ``defaults.exact_scales``; unused without a mixture)."""
         return np.stack([s[0] for s in self._sigmas]) * self._exact
 
     # ---- live per-action arrays (updated in place by every step; copy to keep) -----------------
@@ -271,6 +313,11 @@ class FollowerBank:
         return self._bank.recent
 
     @property
+    def outlier_frames(self) -> int:
+        """Frames since reset with a channel far outside what the templates span."""
+        return int(self._bank.outlier_frames[0])
+
+    @property
     def fits(self) -> np.ndarray:
         """(K,) float: each action's recent log-likelihood ratio against the background model
         [nats per channel per frame] (less the pace term when ``pace_weight > 0``)."""
@@ -308,6 +355,7 @@ class FollowerBank:
         out.log_likelihood = float(self._state.loglik[shown])
         out.fit = float(self._bank.fit[shown])
         out.threshold = float(self._model.thresholds[shown])
+        out.outlier = bool(self._state.outliers[0] > 0)
 
     def follow(self, X) -> dict[str, np.ndarray]:
         """Step through ``X (N, D)`` from a fresh start; returns arrays for plotting:

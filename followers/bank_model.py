@@ -21,7 +21,7 @@ from typing import NamedTuple
 import numpy as np
 
 from followers.config import BankConfig
-from followers.defaults import exact_scale, pooled_sigma, recognition_sigma
+from followers.defaults import exact_scales, pooled_sigma, recognition_sigma
 
 
 class BankModel(NamedTuple):
@@ -85,33 +85,77 @@ class BankState(NamedTuple):
     decision: np.ndarray         # (4,) int64: see ``_bank_kernels``
     mixture_state: np.ndarray    # (2,): [weight, forgetful count]
     gated: np.ndarray            # (1,) int64: the action the followers were last gated for
+    outlier_frames: np.ndarray   # (1,) int64: frames since reset with an outlier channel
 
 
-def bank_sigmas(arrays: list[np.ndarray], config: BankConfig):
+def check_size(arrays: list[np.ndarray], config: BankConfig, *, levels: int,
+               resolution: int) -> int:
+    """The bytes a bank of ``arrays`` needs for its model and state (with what building them
+    holds at once); ValueError when that is above ``config.max_bytes``."""
+    states = resolution * sum(a.shape[0] for a in arrays)
+    channels = arrays[0].shape[1]
+    # templates, emission tables of two models, sigmas while building; forward variables
+    need = 8 * states * (8 * channels + 2 * levels + 10)
+    if need > config.max_bytes:
+        raise ValueError(
+            f"a bank of {len(arrays)} templates ({states} states x {channels} channels) needs "
+            f"about {need / 1e9:.1f} GB, more than BankConfig.max_bytes = "
+            f"{config.max_bytes / 1e9:.1f} GB; use fewer or shorter templates, or pass "
+            f"config=BankConfig(max_bytes=...) to allow it")
+    return need
+
+
+def segment_moments(stacked: np.ndarray, starts: np.ndarray):
+    """(mean, variance), each (len(starts), D), of the runs of rows of ``stacked (N, D)`` that
+    begin at ``starts`` (increasing, the first 0) and end where the next begins."""
+    counts = np.diff(np.append(starts, stacked.shape[0]))[:, None]
+    mean = np.add.reduceat(stacked, starts, axis=0) / counts
+    centred = stacked - np.repeat(mean, counts[:, 0], axis=0)
+    return mean, np.add.reduceat(centred * centred, starts, axis=0) / counts
+
+
+def bank_sigmas(arrays: list[np.ndarray], config: BankConfig, own=None):
     """(following, recognition, exact) sigmas of the default emission models: K (T_k, D)
     sigmas for the recursion, K for the recognition score, and the exact-repetition
-    component's (K, D) scale relative to the following sigma (None: no mixture)."""
-    base = pooled_sigma(arrays, config.follower)
-    sigmas = [np.broadcast_to(config.following_scale * base, a.shape) for a in arrays]
-    recognition = [recognition_sigma(a, config.recognition_scale * base, config)
-                   for a in arrays]
+    component's (K, D) scale relative to the following sigma (None: no mixture).
+
+    own : K (T_k, D) sigmas or None (a trained follower's per-state spread, say): that
+    action's base sigma, floored at the pooled default; None: the pooled default."""
+    own = own or [None] * len(arrays)
+    pooled = pooled_sigma(arrays, config.follower)
+    bases = [np.broadcast_to(pooled, a.shape) if o is None else np.maximum(o, pooled)
+             for a, o in zip(arrays, own)]
+    offsets = np.cumsum([0] + [a.shape[0] for a in arrays[:-1]])
+    _, variance = segment_moments(np.concatenate(arrays, axis=0), offsets)
+    spread = np.sqrt(variance)
+    sigmas = [config.following_scale * b for b in bases]
+    recognition = [recognition_sigma(s, config.recognition_scale * b, config)
+                   for s, b in zip(spread, bases)]
     exact = None
     if config.mixture_start > 0.0:
-        exact = np.stack([exact_scale(a, base, config.exact_floor) for a in arrays])
+        typical = np.stack([pooled if o is None else np.median(b, axis=0)
+                            for o, b in zip(own, bases)])
+        exact = exact_scales(arrays, typical, config.exact_floor)
         exact /= config.following_scale
     return sigmas, recognition, exact
 
 
-def outline_model(template: np.ndarray, states: int, spread: np.ndarray, config: BankConfig):
-    """The outline model of one template: ``(mean, variance)``, each (states, D) float, from
-    ``states`` equal stretches of ``template (T, D)`` (T >= states); ``spread (D,)``: the
-    bank's pooled channel spread, for the variance floor."""
-    stretches = np.array_split(np.arange(template.shape[0]), states)
-    mean = np.stack([template[r].mean(axis=0) for r in stretches])
-    floor = (config.outline_own_variance * template.var(axis=0)
-             + config.outline_floor * spread ** 2)
-    variance = np.stack([template[r].var(axis=0) for r in stretches]) + floor
-    return mean, variance
+def outline_models(stacked: np.ndarray, lengths: np.ndarray, states: int,
+                   config: BankConfig):
+    """Every template's outline model: ``(mean, variance)``, each (K, states, D), from
+    ``states`` equal stretches of each template (the first ``T % states`` a frame longer;
+    every T >= states); ``stacked (sum T_k, D)``: the templates one above the other."""
+    K, D = lengths.shape[0], stacked.shape[1]
+    offsets = np.cumsum(np.append(0, lengths[:-1]))
+    q, r = np.divmod(lengths, states)
+    i = np.arange(states)
+    starts = (offsets[:, None] + i * q[:, None] + np.minimum(i, r[:, None])).ravel()
+    mean, variance = segment_moments(stacked, starts)
+    _, own = segment_moments(stacked, offsets)
+    spread = np.maximum(stacked.std(axis=0), 1e-6 * max(1.0, float(np.abs(stacked).max())))
+    floor = config.outline_own_variance * own + config.outline_floor * spread ** 2
+    return (mean.reshape(K, states, D),
+            variance.reshape(K, states, D) + floor[:, None, :], spread)
 
 
 def build_bank_model(arrays: list[np.ndarray], config: BankConfig, *, resolution: int,
@@ -124,16 +168,15 @@ def build_bank_model(arrays: list[np.ndarray], config: BankConfig, *, resolution
     c = config
     K = len(arrays)
     stacked = np.concatenate(arrays, axis=0)
-    spread = np.maximum(stacked.std(axis=0), 1e-6 * max(1.0, float(np.abs(stacked).max())))
-    S = min(c.outline_states, min(a.shape[0] for a in arrays))
-    outlines = [outline_model(a, S, spread, c) for a in arrays]
-    variance = np.stack([v for _, v in outlines])
+    lengths = np.array([a.shape[0] for a in arrays])
+    outline_mean, variance, spread = outline_models(stacked, lengths,
+                                                    min(c.outline_states, lengths.min()), c)
     rejecting = math.isfinite(c.reject_margin)
     hysteresis = c.reject_hysteresis if rejecting else 0.0
     idle = max(restart)
     pace_reference = c.pace_reference * resolution
     return BankModel(
-        outline_mean=np.stack([m for m, _ in outlines]), outline_inv_var=1.0 / variance,
+        outline_mean=outline_mean, outline_inv_var=1.0 / variance,
         outline_log_norm=-0.5 * np.log(2.0 * np.pi * variance),
         background_mean=stacked.mean(axis=0), background_weight=1.0 / spread ** 2,
         background_log_norm=-0.5 * np.log(2.0 * np.pi * spread ** 2),
@@ -164,7 +207,7 @@ def bank_state(model: BankModel) -> BankState:
         pace=np.zeros(K), last_position=np.zeros(K), since_end=np.zeros(K),
         last_main=np.zeros(K, dtype=np.int64), posterior=np.zeros(K), progress=np.zeros(K),
         variance=np.zeros(K), decision=np.zeros(4, dtype=np.int64), mixture_state=np.zeros(2),
-        gated=np.zeros(1, dtype=np.int64))
+        gated=np.zeros(1, dtype=np.int64), outlier_frames=np.zeros(1, dtype=np.int64))
 
 
 def reset_bank(model: BankModel, state: BankState) -> None:
@@ -183,4 +226,5 @@ def reset_bank(model: BankModel, state: BankState) -> None:
     state.last_main[:] = 0
     state.posterior[:] = 1.0 / K
     state.decision[:] = (-1, 0, 0, 0)
+    state.outlier_frames[:] = 0
     state.mixture_state[:] = (model.mixture_start, model.mixture_prior)

@@ -123,6 +123,9 @@ class FollowerConfig(_Config):
     outlier_sigmas: float = _f(5.0, "sigmas", "a channel further than this from a state counts as "
                                "this far (inf: plain Gaussian)", low=0.0, low_open=True,
                                finite=False)
+    outlier_span: float = _f(3.0, "template ranges", "a value further than this beyond the "
+                             "templates' range of its channel is an outlier: left out", low=0.0,
+                             low_open=True, finite=False)
     prune_mass: float = _f(1e-8, "probability", "states at the edges of the posterior holding less "
                            "are dropped (0: the fixed window only)", low=0.0, high=1.0,
                            high_open=True)
@@ -243,6 +246,10 @@ class BankConfig(_Config):
     active_restart: float = _f(1e-4, "probability per frame", "the shown action's follower "
                                "begins a new repetition from anywhere (the others: the chain's "
                                "restart)", low=0.0, high=1.0, high_open=True)
+    max_bytes: float = _f(4e9, "bytes", "largest model and state a bank may allocate; a larger "
+                          "bank is refused, naming its size", low=0.0, low_open=True)
+    frame_budget: float = _f(0.04, "seconds", "a bank whose step takes longer (measured once "
+                             "when it is large) says so in the log", low=0.0, low_open=True)
 
     def _validate_together(self) -> None:
         if not isinstance(self.follower, FollowerConfig):

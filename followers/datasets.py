@@ -7,8 +7,10 @@ header says ``@classLabel true``); ``?`` is a missing value. Recordings may diff
 """
 from __future__ import annotations
 
+import codecs
 import importlib.util
 import os
+import pickle
 
 import numpy as np
 
@@ -67,3 +69,60 @@ def aeon_dataset(name: str, split: str) -> tuple[list[np.ndarray], np.ndarray]:
     if not os.path.exists(path):
         raise FileNotFoundError(f"aeon has no {name} {split} split (looked for {path})")
     return read_ts(path)
+
+
+def _wheel_path(package: str, *parts: str, install: str) -> str:
+    spec = importlib.util.find_spec(package)
+    if spec is None:
+        raise ImportError(f"these recordings come inside the {package} wheel: pip install "
+                          f"{install}")
+    path = os.path.join(spec.submodule_search_locations[0], *parts)
+    if not os.path.exists(path):
+        raise FileNotFoundError(f"{package} has no {parts[-1]} (looked for {path})")
+    return path
+
+
+class _ArraysOnly(pickle.Unpickler):
+    """Unpickles numpy arrays, dtypes and plain containers, and refuses every other class: the
+    file is read without running anything it names."""
+
+    ALLOWED = {("numpy.core.multiarray", "_reconstruct"),
+               ("numpy._core.multiarray", "_reconstruct"), ("numpy", "ndarray"),
+               ("numpy", "dtype"), ("_codecs", "encode")}
+
+    def find_class(self, module, name):
+        if (module, name) not in self.ALLOWED:
+            raise pickle.UnpicklingError(f"refusing {module}.{name} in a recordings file")
+        if name == "encode":
+            return codecs.encode
+        if name == "_reconstruct":
+            return np._core.multiarray._reconstruct
+        return getattr(np, name)
+
+
+def seglearn_watch(*, rate: float = 10.0, seconds: float = 10.0):
+    """Smartwatch recordings shipped inside the seglearn wheel: 10 subjects performing sets of 7
+    shoulder exercises (pendulum, abduction, forward elevation, internal and external rotation,
+    trapezius, row) with the left and the right arm, 6 channels (accelerometer [g] and
+    gyroscope [rad/s]) at 50 Hz.
+
+    Each set becomes one take: ``seconds`` from the middle of it, resampled to ``rate`` Hz by
+    averaging. Returns (takes: list of 140 (T, 6) float arrays, labels (140,) str, subjects
+    (140,) int 1-10). Raises ImportError when seglearn is not installed."""
+    path = _wheel_path("seglearn", "data", "watch_dataset.npy", install="seglearn")
+    with open(path, "rb") as handle:
+        if np.lib.format.read_magic(handle) == (1, 0):
+            np.lib.format.read_array_header_1_0(handle)
+        else:
+            np.lib.format.read_array_header_2_0(handle)
+        data = _ArraysOnly(handle, encoding="latin1").load().item()
+    step = int(round(50.0 / rate))
+    length = int(round(seconds * rate)) * step
+    takes = []
+    for series in data["X"]:
+        middle = (series.shape[0] - length) // 2
+        stretch = np.asarray(series[middle:middle + length], dtype=np.float64)
+        takes.append(stretch.reshape(-1, step, stretch.shape[1]).mean(axis=1))
+    names = [str(n) for n in data["y_labels"]]
+    labels = np.array([names[int(i)] for i in data["y"]])
+    return takes, labels, np.asarray(data["subject"], dtype=int)

@@ -11,7 +11,7 @@
   channel spread: another performance of an action differs from the demonstration in
   intensity as well as timing.
 - **exact-repetition scale** (a bank): the template's own noise from its second differences
-  (``noise_sigma``), within [``exact_floor``, 1] times the default sigma.
+  (``noise_sigmas``), within [``exact_floor``, 1] times the default sigma.
 - **window** (half-width p, in states): ``ceil(window_fraction * T)``, at least ``window_min``
   and at most T. The posterior of a follower on track is a few states wide; p only has to
   hold it through ambiguous stretches (a held pose).
@@ -81,15 +81,13 @@ def default_sigma(template: np.ndarray, *, pooled: list[np.ndarray] | None = Non
     return np.ascontiguousarray(np.broadcast_to(base, template.shape))
 
 
-def recognition_sigma(template: np.ndarray, sigma: np.ndarray, config) -> np.ndarray:
-    """(T, D) float: a bank's recognition sigma for one template: ``sigma`` ((D,) or (T, D)),
-    but at least ``config.recognition_floor`` times the template's own channel spread
+def recognition_sigma(spread: np.ndarray, sigma: np.ndarray, config) -> np.ndarray:
+    """(T, D) float: a bank's recognition sigma for one template: ``sigma`` (T, D), but at
+    least ``config.recognition_floor`` times the template's own channel ``spread (D,)``
     (floored like the default sigma); ``config`` a ``BankConfig``."""
-    spread = template.std(axis=0)
     rms = float(np.sqrt(np.mean(spread ** 2)))
-    sigma = np.broadcast_to(sigma, template.shape)
     if rms <= 0.0:
-        return sigma.copy()
+        return np.array(sigma)
     own = config.recognition_floor * np.maximum(spread, config.follower.sigma_floor * rms)
     return np.maximum(sigma, own[None, :])
 
@@ -102,20 +100,31 @@ def noise_sigma(template: np.ndarray) -> np.ndarray:
     second differences near zero, so the median (robust to the motion's few sharp turns)
     measures the noise: ``median |x[t+1] - 2 x[t] + x[t-1] - m| / (0.6745 sqrt(6))`` with ``m``
     the median second difference. Zeros for templates of fewer than 3 frames."""
-    if template.shape[0] < 3:
-        return np.zeros(template.shape[1])
-    second = np.diff(template, n=2, axis=0)
-    mad = np.median(np.abs(second - np.median(second, axis=0)), axis=0)
-    return mad / (0.6745 * math.sqrt(6.0))
+    return noise_sigmas([template])[0]
 
 
-def exact_scale(template: np.ndarray, sigma: np.ndarray, floor: float) -> np.ndarray:
-    """(D,) float: the scale of a bank's exact-repetition component for one template, relative
-    to the default ``sigma`` ((D,), per channel): the template's own noise per channel,
-    clipped to [``floor``, 1]. A take replayed by its performer differs from the
+def noise_sigmas(templates: list[np.ndarray]) -> np.ndarray:
+    """(K, D) float: ``noise_sigma`` of every template, templates of one length at once."""
+    K, D = len(templates), templates[0].shape[1]
+    out = np.zeros((K, D))
+    lengths = np.array([t.shape[0] for t in templates])
+    for length in np.unique(lengths):
+        if length < 3:
+            continue
+        which = np.nonzero(lengths == length)[0]
+        second = np.diff(np.stack([templates[k] for k in which]), n=2, axis=1)
+        centre = np.median(second, axis=1, keepdims=True)
+        out[which] = np.median(np.abs(second - centre), axis=1) / (0.6745 * math.sqrt(6.0))
+    return out
+
+
+def exact_scales(templates: list[np.ndarray], sigmas: np.ndarray, floor: float) -> np.ndarray:
+    """(K, D) float: the scale of a bank's exact-repetition component for each template,
+    relative to its default sigma (``sigmas (K, D)``, per channel): the template's own noise
+    per channel, clipped to [``floor``, 1]. A take replayed by its performer differs from the
     demonstration by about its sensor noise; a channel noisier than the default sigma keeps
     the default, a nearly noiseless one is floored."""
-    return np.clip(noise_sigma(template) / sigma, floor, 1.0)
+    return np.clip(noise_sigmas(templates) / sigmas, floor, 1.0)
 
 
 def default_window(length: int, config: FollowerConfig = _DEFAULT) -> int:

@@ -113,7 +113,7 @@ class Follower:
         self.config = config = resolve_config(config, transitions, FollowerConfig.preset)
         model = chain(config, transitions)
         T, D = tmpl.shape
-        given = sigma is not None
+        given = self._sigma_given = sigma is not None
         self._sigma = _own(as_sigma(sigma, (T, D)), sigma) if given else default_sigma(
             tmpl, config=config)
         self._window = default_window(T, config) if window is None else as_window(window, T)
@@ -122,6 +122,7 @@ class Follower:
         self._forward = build_forward(
             [tmpl], [self._sigma], np.array([self._window]), model,
             cap=config.outlier_sigmas ** 2, prune=config.prune_mass, tilt=config.subframe_tilt,
+            outlier_span=config.outlier_span,
             adaptation=adaptation(config, config.adapt_sigma and not given and not mop),
             report_adaptation=adaptation(config, not given))
         self._state = forward_state(self._forward)
@@ -146,6 +147,11 @@ class Follower:
     def sigma(self) -> np.ndarray:
         """(T, D) float64 [input units]: per state and channel."""
         return self._sigma.copy()
+
+    @property
+    def sigma_given(self) -> bool:
+        """True when the sigma was given (``sigma=``), not estimated from the template."""
+        return self._sigma_given
 
     @property
     def window(self) -> int:

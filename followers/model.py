@@ -29,6 +29,8 @@ The layout of the state (see ``_kernels`` for the algorithm):
 - Set by the owner between frames: ``restart (K, 2)`` [probability per frame of a new
   repetition from anywhere, from the last state], ``subframe (K,)`` (report the position
   inside a state's cell), ``mixture (1,)`` (the weight above).
+- ``outliers (1,)``: channels of the last frame outside ``[model.lower, model.upper]`` (far
+  outside what the templates span: a stuck or absurd sensor), left out like missing ones.
 - Scratch: ``xs, observed (D,)`` (the cleaned frame), ``mix (M,)``, ``residual (S,)`` (each
   state's capped sum of squared z-scores), ``sub (4, S)`` (see ``_kernels._subframe_rows``).
 """
@@ -41,9 +43,6 @@ import numpy as np
 
 from followers.transitions import TransitionModel
 
-# a clamped input value stays this many (template range + sigma) away from the templates' range:
-# far away, yet every squared distance stays finite in float64 (a numerical guard, not a knob)
-CLAMP_SPAN = 1e3
 
 
 class ForwardModel(NamedTuple):
@@ -58,7 +57,7 @@ class ForwardModel(NamedTuple):
     log_norm_sum: np.ndarray   # (E, S): its sum over channels
     exact_inv2: np.ndarray     # (K, D): 1 / exact scale**2 (model 2, relative to model 0)
     exact_log: np.ndarray      # (K, D): log exact scale
-    lower: np.ndarray          # (D,): input values are clamped into [lower, upper]
+    lower: np.ndarray          # (D,): a value outside [lower, upper] is an outlier (left out)
     upper: np.ndarray          # (D,)
     advance: np.ndarray        # (M, A + 1): P(advance by a states | speed level)
     advance_tail: np.ndarray   # (M, A + 1): P(advance >= a), what lands on the last state
@@ -89,6 +88,7 @@ class ForwardState(NamedTuple):
     restart: np.ndarray
     subframe: np.ndarray
     mixture: np.ndarray
+    outliers: np.ndarray
     xs: np.ndarray
     observed: np.ndarray
     mix: np.ndarray
@@ -174,17 +174,28 @@ def _exact_scales(exact, K: int, D: int) -> np.ndarray:
     return scales
 
 
+def span_bounds(stacked: np.ndarray, span: float) -> tuple[np.ndarray, np.ndarray]:
+    """(lower, upper), each (D,): ``span`` times each channel's range over ``stacked`` beyond
+    that range (a channel that never moves counts a twentieth of the RMS range; if none moves,
+    1), outside which an input value is an outlier."""
+    lo, hi = stacked.min(axis=0), stacked.max(axis=0)
+    width = hi - lo
+    rms = float(np.sqrt(np.mean(width ** 2)))
+    width = np.maximum(width, 0.05 * rms) if rms > 0.0 else np.ones_like(width)
+    return lo - span * width, hi + span * width
+
+
 def build_forward(templates: list[np.ndarray], sigmas: list[np.ndarray], windows,
                   transitions: TransitionModel, *, cap: float, prune: float, tilt: float,
-                  recognition: list[np.ndarray] | None = None, exact=None,
-                  adaptation=None, report_adaptation=None) -> Forward:
+                  outlier_span: float, recognition: list[np.ndarray] | None = None,
+                  exact=None, adaptation=None, report_adaptation=None) -> Forward:
     """The forward model of K followers that share one transition model.
 
     templates, sigmas : K (T_k, D) float arrays (validated) [input units]; windows (K,) int
         [template frames]; with ``transitions.resolution = R > 1`` each template and sigma is
         upsampled to R (T_k - 1) + 1 states.
     cap : squared z-scores are capped at it; prune : mass below which edge states are dropped;
-    tilt : see ``_kernels._tilt``.
+    tilt : see ``_cells._tilt``; outlier_span : see ``span_bounds``.
     recognition : K (T_k, D) sigmas of a second emission model that only scores frames, or
         None; exact : with it, the exact-repetition component's scale relative to ``sigmas``
         (a float or (K, D)), or None for no mixture.
@@ -212,14 +223,13 @@ def build_forward(templates: list[np.ndarray], sigmas: list[np.ndarray], windows
     rec = None if recognition is None else _stacked(recognition, owned=R > 1)
     weights, log_norm, log_norm_sum = _emission_tables(sigma, rec)
     scales = _exact_scales(exact, K, D)
-    lo, hi = stacked.min(axis=0), stacked.max(axis=0)
-    span = CLAMP_SPAN * (hi - lo + sigma.max(axis=0))
+    lower, upper = span_bounds(stacked, outlier_span)
     adapt, prior = _adaptation(adaptation)
     report, report_prior = _adaptation(report_adaptation)
     model = ForwardModel(
         stacked, offsets, lengths, np.ascontiguousarray(windows, dtype=np.int64), weights,
         log_norm, log_norm_sum, np.ascontiguousarray(1.0 / scales ** 2),
-        np.ascontiguousarray(np.log(scales)), lo - span, hi + span,
+        np.ascontiguousarray(np.log(scales)), lower, upper,
         *_transition_tables(transitions), np.stack([adapt, report]), float(cap), float(prune),
         float(tilt), rec is not None)
     return Forward(model, R, (transitions.restart_anywhere, transitions.restart),
@@ -237,8 +247,8 @@ def forward_state(forward: Forward) -> ForwardState:
         main=np.zeros(K, dtype=np.int64), fresh=np.ones(K, dtype=np.bool_), loglik=np.zeros(K),
         frame_loglik=np.zeros((3, K)), scale2=np.ones((2, K)), scale_weight=np.zeros((2, K)),
         restart=np.tile(forward.restart, (K, 1)), subframe=np.zeros(K, dtype=np.bool_),
-        mixture=np.zeros(1), xs=np.zeros(D), observed=np.zeros(D), mix=np.zeros(M),
-        residual=np.zeros(S), sub=np.zeros((4, S)))
+        mixture=np.zeros(1), outliers=np.zeros(1, dtype=np.int64), xs=np.zeros(D),
+        observed=np.zeros(D), mix=np.zeros(M), residual=np.zeros(S), sub=np.zeros((4, S)))
     reset_forward(forward, state)
     return state
 
@@ -255,6 +265,7 @@ def reset_forward(forward: Forward, state: ForwardState) -> None:
     state.fresh[:] = True
     state.loglik[:] = 0.0
     state.frame_loglik[:] = 0.0
+    state.outliers[:] = 0
     state.scale2[:] = 1.0
     state.scale_weight[:] = forward.scale_prior[:, None]
 

@@ -354,8 +354,6 @@ def _listen_performer_actions(port: int, stop, actions: list) -> None:
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(reason="the follower bank still takes absurd values for an action; the "
-                          "bank's outlier rejection removes this mark", strict=False)
 @pytest.mark.parametrize("value", [1e6, -50.0])
 def test_a_glove_stuck_at_an_absurd_value_plays_nothing(value, tmp_path):
     import threading

@@ -99,6 +99,7 @@ class PerformerRuntime:
         self.was_ok = feed.status == OK
         self.seen: set[str] = set()
         self.steps = 0               # bank steps since the input was last (re)joined
+        self.outliers = 0            # frames with a channel far outside the templates (absurd)
         self.problem = ""            # why the input cannot be followed right now, if it cannot
         self._reported = ""
         self._feed_channels: tuple[str, ...] | None = None
@@ -162,6 +163,8 @@ class PerformerRuntime:
         self._following = True
         self.steps += 1
         self._last = out
+        if getattr(out, "outlier", False):
+            self.outliers += 1
         self.still = self._stopped(out)
         state = self.state
         state.action = None if self.still else out.action
@@ -583,7 +586,7 @@ class Session:
             "performers": {p.name: {"status": "failed" if p.problem else p.status,
                                     "message": p.problem or p.feed.message,
                                     "input_frame": p.steps - 1 if p.steps else None,
-                                    "still": p.still,
+                                    "still": p.still, "outliers": p.outliers,
                                     **p.state.as_dict(), "posterior": p.posterior()}
                            for p in self.performers},
             "characters": {c.name: {
@@ -609,7 +612,8 @@ class Session:
             performers={p.name: {"status": p.status, "message": p.problem or p.feed.message,
                                  "frames": p.feed.frames,
                                  "latency": getattr(p.feed, "latency", None),
-                                 "actions_seen": sorted(p.seen)} for p in self.performers},
+                                 "actions_seen": sorted(p.seen),
+                                 "outliers": p.outliers} for p in self.performers},
             mode=self.mode_label, pictures=self.worker is not None,
             late_frames=self.late_frames, max_late=self.max_late, slipped=self.slipped,
             slips=self.slips, warmup_seconds=self.warmup_seconds)

@@ -121,8 +121,11 @@ class SessionReport:
                 status = f"{status} ({info['message']})"
             latency = info.get("latency")
             timing = f", input latency {1e3 * latency:.0f} ms" if latency else ""
+            outliers = info.get("outliers", 0)
+            absurd = (f", {outliers} frames far outside the recorded range (no action)"
+                      if outliers else "")
             lines.append(f"  performer {name}: {status}, {info['frames']} input frames"
-                         f"{timing}, actions followed: "
+                         f"{timing}{absurd}, actions followed: "
                          f"{', '.join(info['actions_seen']) or 'none'}")
         for event in self.events:
             lines.append(f"  t={event['t']:.2f}s {event['performer']}: {event['message']}")

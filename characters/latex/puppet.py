@@ -290,20 +290,7 @@ class LatexPuppet:
         """
         timings: dict[str, float] = {}
         clock = time.perf_counter()
-        if isinstance(masses, bool) or not isinstance(masses, (int, np.integer)):
-            raise TypeError(f"masses must be an int (target node count), got {masses!r}")
-        if masses < MIN_MASSES:
-            raise ValueError(f"masses={masses} is too small for three closed layers: the latex "
-                             f"skin needs a closed surface of at least ~{int(MIN_MASSES * 0.6)} "
-                             f"vertices and the foam and cavity layers at least 4 nodes each "
-                             f"beneath it; use masses >= {MIN_MASSES}")
-        if connection_weights not in _connection.WEIGHTINGS:
-            raise ValueError(f"connection_weights must be one of {_connection.WEIGHTINGS}, got "
-                             f"{connection_weights!r}")
-        if not isinstance(region_nodes, (int, np.integer)) or region_nodes < 1:
-            raise ValueError(f"region_nodes must be an int >= 1, got {region_nodes!r}")
-        if not (isinstance(skin_thickness, (int, float)) and skin_thickness > 0):
-            raise ValueError(f"skin_thickness must be a length > 0 [m], got {skin_thickness!r}")
+        _check_build_options(masses, connection_weights, region_nodes, skin_thickness)
         layer_materials = _resolve_materials(materials)
         integrator = _make_integrator(integrator, substeps)
 
@@ -324,17 +311,7 @@ class LatexPuppet:
                              f"the mesh has only {len(clean.vertices)} vertices; use fewer "
                              f"masses or a finer mesh")
         spacing = target_edge_length(clean.vertices, clean.faces, surface_target)
-        landmarks: dict[str, np.ndarray] = {}
-        if finger_regions is None:
-            specs = auto_regions(clean.vertices, 1.2 * spacing)
-        else:
-            specs, landmark_input = parse_regions(finger_regions)
-            for name, index in landmark_input.items():
-                bad = index[(index < 0) | (index >= len(clean.index_map))]
-                if bad.size:
-                    raise ValueError(f"landmark {name!r}: vertex {int(bad[0])} does not exist")
-                mapped = clean.index_map[index]
-                landmarks[name] = mapped[mapped >= 0]
+        specs, landmarks = _region_specs(finger_regions, clean, spacing)
         members = resolve_regions(specs, clean.vertices, clean.faces, clean.index_map, distance)
         locked_sets = {name: idx[spread_subset(clean.vertices[idx], region_nodes)]
                        for name, idx in members.items()}
@@ -352,24 +329,7 @@ class LatexPuppet:
         kept = decimation.kept
         clock = time.perf_counter()
 
-        # a region keeps every decimated vertex among its marked ones (at least its locked ones)
-        regions: list[_Region] = []
-        position_of = np.full(len(clean.vertices), -1, dtype=np.int64)
-        position_of[kept] = np.arange(len(kept))
-        row = 0
-        for name, idx in members.items():
-            nodes = position_of[idx]
-            nodes = np.sort(nodes[nodes >= 0])
-            if nodes.size == 0:  # cannot happen while locked vertices survive; kept as a guard
-                raise ValueError(f"finger region {name!r} was lost in decimation")
-            spec = specs[name]
-            opening = spec.opening or default_opening(clean.vertices, clean.faces, idx,
-                                                      0.1 * float(np.ptp(clean.vertices, 0).max()))
-            rest = layers.points[nodes]
-            regions.append(_Region(name, nodes, rest, rest.mean(0), opening,
-                                   slice(row, row + len(nodes))))
-            row += len(nodes)
-
+        regions = _decimated_regions(members, specs, clean, kept, layers)
         model, target_k, target_c = _make_model(layers, layer_materials, regions,
                                                 finger_stiffness, gravity, skin_thickness)
         conn = _connection.build_connection(clean.vertices, clean.faces, kept,
@@ -377,23 +337,84 @@ class LatexPuppet:
                                             surface_faces=decimation.faces)
         timings["model"] = time.perf_counter() - clock
 
-        r = roundness(layers.points, decimation.faces)
-        volume = tetrahedron_volumes(layers.points, layers.tetrahedra).sum()
-        report = BuildReport(
-            source=loaded.source, repairs=list(clean.repairs),
-            visual_vertices=len(clean.vertices), visual_faces=len(clean.faces),
-            surface_nodes=len(kept), layer_counts=tuple(int(c) for c in np.bincount(
-                layers.layer, minlength=3)), tetrahedra=len(layers.tetrahedra),
-            springs=model.spring_count, stopped_early=decimation.stopped_early,
-            surface_roundness_mean=float(r.mean()), surface_roundness_min=float(r.min()),
-            tetrahedra_volume_share=float(volume / signed_volume(clean.vertices, clean.faces)),
-            seconds={k: round(v, 3) for k, v in timings.items()})
+        report = _build_report(loaded.source, clean, decimation, layers, model, timings)
         log.info("latex puppet from %s: %s", loaded.source, report)
         return cls(model=model, layers=layers, surface_faces=decimation.faces,
                    surface_visual_index=kept, visual_vertices=clean.vertices, faces=clean.faces,
                    connection=conn, regions=regions, finger_stiffness=target_k,
                    finger_damping=target_c, landmarks=landmarks, vertex_colors=clean.colors,
                    integrator=integrator, materials=layer_materials, report=report)
+
+
+def _check_build_options(masses, connection_weights, region_nodes, skin_thickness) -> None:
+    if isinstance(masses, bool) or not isinstance(masses, (int, np.integer)):
+        raise TypeError(f"masses must be an int (target node count), got {masses!r}")
+    if masses < MIN_MASSES:
+        raise ValueError(f"masses={masses} is too small for three closed layers: the latex "
+                         f"skin needs a closed surface of at least ~{int(MIN_MASSES * 0.6)} "
+                         f"vertices and the foam and cavity layers at least 4 nodes each "
+                         f"beneath it; use masses >= {MIN_MASSES}")
+    if connection_weights not in _connection.WEIGHTINGS:
+        raise ValueError(f"connection_weights must be one of {_connection.WEIGHTINGS}, got "
+                         f"{connection_weights!r}")
+    if not isinstance(region_nodes, (int, np.integer)) or region_nodes < 1:
+        raise ValueError(f"region_nodes must be an int >= 1, got {region_nodes!r}")
+    if not (isinstance(skin_thickness, (int, float)) and skin_thickness > 0):
+        raise ValueError(f"skin_thickness must be a length > 0 [m], got {skin_thickness!r}")
+
+
+def _region_specs(finger_regions, clean: CleanSurface, spacing: float) -> tuple[dict, dict]:
+    """({finger: RegionSpec}, {landmark: (L,) cleaned vertex indices}): the given regions (a
+    sidecar or a dict, in the input mesh's vertex numbering) or ones chosen by position."""
+    landmarks: dict[str, np.ndarray] = {}
+    if finger_regions is None:
+        return auto_regions(clean.vertices, 1.2 * spacing), landmarks
+    specs, landmark_input = parse_regions(finger_regions)
+    for name, index in landmark_input.items():
+        bad = index[(index < 0) | (index >= len(clean.index_map))]
+        if bad.size:
+            raise ValueError(f"landmark {name!r}: vertex {int(bad[0])} does not exist")
+        mapped = clean.index_map[index]
+        landmarks[name] = mapped[mapped >= 0]
+    return specs, landmarks
+
+
+def _decimated_regions(members: dict, specs: dict, clean: CleanSurface, kept: np.ndarray,
+                       layers: Layers) -> list[_Region]:
+    """Each finger region on the decimated surface: every decimated vertex among its marked
+    ones (at least its locked ones), its rest positions, its opening, its rows of the targets."""
+    regions: list[_Region] = []
+    position_of = np.full(len(clean.vertices), -1, dtype=np.int64)
+    position_of[kept] = np.arange(len(kept))
+    row = 0
+    for name, idx in members.items():
+        nodes = position_of[idx]
+        nodes = np.sort(nodes[nodes >= 0])
+        if nodes.size == 0:  # cannot happen while locked vertices survive; kept as a guard
+            raise ValueError(f"finger region {name!r} was lost in decimation")
+        spec = specs[name]
+        opening = spec.opening or default_opening(clean.vertices, clean.faces, idx,
+                                                  0.1 * float(np.ptp(clean.vertices, 0).max()))
+        rest = layers.points[nodes]
+        regions.append(_Region(name, nodes, rest, rest.mean(0), opening,
+                               slice(row, row + len(nodes))))
+        row += len(nodes)
+    return regions
+
+
+def _build_report(source, clean: CleanSurface, decimation: Decimation, layers: Layers,
+                  model: MassSpring, timings: dict) -> BuildReport:
+    r = roundness(layers.points, decimation.faces)
+    volume = tetrahedron_volumes(layers.points, layers.tetrahedra).sum()
+    return BuildReport(
+        source=source, repairs=list(clean.repairs),
+        visual_vertices=len(clean.vertices), visual_faces=len(clean.faces),
+        surface_nodes=len(decimation.kept), layer_counts=tuple(int(c) for c in np.bincount(
+            layers.layer, minlength=3)), tetrahedra=len(layers.tetrahedra),
+        springs=model.spring_count, stopped_early=decimation.stopped_early,
+        surface_roundness_mean=float(r.mean()), surface_roundness_min=float(r.min()),
+        tetrahedra_volume_share=float(volume / signed_volume(clean.vertices, clean.faces)),
+        seconds={k: round(v, 3) for k, v in timings.items()})
 
 
 def _build_layers_to_count(clean: CleanSurface, masses: int, surface_target: int,

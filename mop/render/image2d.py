@@ -7,8 +7,8 @@ never bleed colour into the edge). The picture's feathered alpha gives the clean
 
 Why a numba scanline rasteriser rather than OpenGL: measured in benchmarks/image_puppet.py on a
 machine without a GPU, pyrender/EGL on llvmpipe spends more per frame on its fixed costs (and
-the read-back) than this kernel spends drawing a whole 512x512 puppet; see the README section
-on image puppets for the figures.
+the read-back) than this kernel spends drawing a whole 512x512 puppet; the figures are in
+docs/benchmarks.md (Image puppets).
 
 Coverage rule: pixel centres are at integer (x = column, y = row). Every edge is evaluated in
 one canonical direction (lower vertex index first), and a pixel exactly on an edge goes to one
@@ -88,6 +88,93 @@ def _lerp_packed(a, b, w):
 
 
 @njit(**_JIT)
+def _sample(texture, s_fixed, t_fixed):
+    """Bilinear sample of texture (Ht, Wt) uint32 premultiplied RGBA at a 16.16 fixed-point
+    position already clamped to the texture: the packed texel as int64."""
+    tex_h, tex_w = texture.shape[0], texture.shape[1]
+    i0 = s_fixed >> 16
+    j0 = t_fixed >> 16
+    wx = ((s_fixed & 0xFFFF) + 128) >> 8
+    wy = ((t_fixed & 0xFFFF) + 128) >> 8
+    i1 = min(i0 + 1, tex_w - 1)
+    j1 = min(j0 + 1, tex_h - 1)
+    top = _lerp_packed(np.int64(texture[j0, i0]), np.int64(texture[j0, i1]), wx)
+    bottom = _lerp_packed(np.int64(texture[j1, i0]), np.int64(texture[j1, i1]), wx)
+    return _lerp_packed(top, bottom, wy)
+
+
+@njit(**_JIT)
+def _over(dst, src, alpha):
+    """Premultiplied over of packed texels: dst * (255 - alpha) / 255 + src, per packed channel
+    pair (alpha = src's, 0 < alpha < 255)."""
+    keep = 255 - alpha
+    keep += keep >> 7  # 0..255 -> 0..256
+    rb = ((((dst & 0x00FF00FF) * keep + 0x00800080) >> 8) & 0x00FF00FF) + (src & 0x00FF00FF)
+    ga = (((((dst >> 8) & 0x00FF00FF) * keep + 0x00800080) >> 8) & 0x00FF00FF) + (
+        (src >> 8) & 0x00FF00FF)
+    return rb | (ga << 8)
+
+
+@njit(**_JIT)
+def _draw_span(out, texture, r, c_low, c_high, s_fixed, t_fixed, s_step, t_step):
+    """Draw row r of `out` from column c_low to c_high (inclusive), the texture position
+    stepping from (s_fixed, t_fixed) by (s_step, t_step) per column, in 16.16 fixed point and
+    clamped so edge pixels never read outside the texture."""
+    s_limit = np.int64(texture.shape[1] - 1) << 16
+    t_limit = np.int64(texture.shape[0] - 1) << 16
+    for c in range(c_low, c_high + 1):
+        src = _sample(texture, min(max(s_fixed, 0), s_limit), min(max(t_fixed, 0), t_limit))
+        s_fixed += s_step
+        t_fixed += t_step
+        alpha = src >> 24
+        if alpha == 0:
+            continue
+        if alpha == 255:
+            out[r, c] = np.uint32(src)
+        else:
+            out[r, c] = np.uint32(_over(np.int64(out[r, c]), src, alpha))
+
+
+@njit(**_JIT)
+def _canonical_edges(screen_xy, v0, v1, v2, ea, eb, es):
+    """The triangle's edges in canonical order (lower vertex index first) into ea, eb (3,), and
+    into es (3,) the side (+1 / -1) of each edge function the triangle lies on."""
+    for k in range(3):
+        a = v0 if k == 0 else (v1 if k == 1 else v2)
+        b = v1 if k == 0 else (v2 if k == 1 else v0)
+        o = v2 if k == 0 else (v0 if k == 1 else v1)
+        if a > b:
+            a, b = b, a
+        ax, ay = screen_xy[a, 0], screen_xy[a, 1]
+        bx, by = screen_xy[b, 0], screen_xy[b, 1]
+        value = (screen_xy[o, 0] - ax) * (by - ay) - (screen_xy[o, 1] - ay) * (bx - ax)
+        ea[k] = a
+        eb[k] = b
+        es[k] = 1.0 if value > 0.0 else -1.0
+
+
+@njit(**_JIT)
+def _row_bounds(screen_xy, ea, eb, es, y, bounds):
+    """Narrow bounds (2,) [lowest, highest column] to the triangle's pixels on row y; False if
+    the row has none."""
+    for k in range(3):
+        a = ea[k]
+        b = eb[k]
+        if not _edge_bound(screen_xy[a, 0], screen_xy[a, 1], screen_xy[b, 0], screen_xy[b, 1],
+                           es[k], y, bounds):
+            return False
+    return bounds[0] <= bounds[1]
+
+
+@njit(**_JIT)
+def _grow_box(drawn, r, c_low, c_high):
+    drawn[0] = min(drawn[0], r)
+    drawn[1] = max(drawn[1], r)
+    drawn[2] = min(drawn[2], c_low)
+    drawn[3] = max(drawn[3], c_high)
+
+
+@njit(**_JIT)
 def rasterise(out, texture, texture_xy, screen_xy, triangles, drawn):
     """Draw textured triangles into `out` with the premultiplied "over" operator.
 
@@ -103,14 +190,10 @@ def rasterise(out, texture, texture_xy, screen_xy, triangles, drawn):
     at texel centres, within 1/255 elsewhere.
     """
     height, width = out.shape[0], out.shape[1]
-    tex_h, tex_w = texture.shape[0], texture.shape[1]
-    s_limit = np.int64(tex_w - 1) << 16
-    t_limit = np.int64(tex_h - 1) << 16
     bounds = np.empty(2)
     ea = np.empty(3, np.int64)
     eb = np.empty(3, np.int64)
     es = np.empty(3)
-    corners = np.empty(3, np.int64)
     for f in range(triangles.shape[0]):
         v0 = triangles[f, 0]
         v1 = triangles[f, 1]
@@ -138,85 +221,22 @@ def rasterise(out, texture, texture_xy, screen_xy, triangles, drawn):
         s_dy = (-ds1 * e2x + ds2 * e1x) * inv
         t_dx = (dt1 * e2y - dt2 * e1y) * inv
         t_dy = (-dt1 * e2x + dt2 * e1x) * inv
-
-        # canonical edges (lower vertex index first) and the side the triangle lies on
-        corners[0] = v0
-        corners[1] = v1
-        corners[2] = v2
-        for k in range(3):
-            a = corners[k]
-            b = corners[(k + 1) % 3]
-            o = corners[(k + 2) % 3]
-            if a > b:
-                a, b = b, a
-            ax, ay = screen_xy[a, 0], screen_xy[a, 1]
-            bx, by = screen_xy[b, 0], screen_xy[b, 1]
-            value = (screen_xy[o, 0] - ax) * (by - ay) - (screen_xy[o, 1] - ay) * (bx - ax)
-            ea[k] = a
-            eb[k] = b
-            es[k] = 1.0 if value > 0.0 else -1.0
-
+        _canonical_edges(screen_xy, v0, v1, v2, ea, eb, es)
         for r in range(row_low, row_high + 1):
             y = float(r)
             bounds[0] = col_min
             bounds[1] = col_max
-            visible = True
-            for k in range(3):
-                a = ea[k]
-                b = eb[k]
-                if not _edge_bound(screen_xy[a, 0], screen_xy[a, 1], screen_xy[b, 0],
-                                   screen_xy[b, 1], es[k], y, bounds):
-                    visible = False
-                    break
-            if not visible or bounds[0] > bounds[1]:
+            if not _row_bounds(screen_xy, ea, eb, es, y, bounds):
                 continue
             c_low = int(bounds[0])
             c_high = int(bounds[1])
-            if r < drawn[0]:
-                drawn[0] = r
-            if r > drawn[1]:
-                drawn[1] = r
-            if c_low < drawn[2]:
-                drawn[2] = c_low
-            if c_high > drawn[3]:
-                drawn[3] = c_high
-            # texture position in 16.16 fixed point, stepped along the row; clamped so edge
-            # pixels never read outside the texture
+            _grow_box(drawn, r, c_low, c_high)
+            # the texture position at the span's first pixel, in 16.16 fixed point
             s = s0 + s_dx * (c_low - x0) + s_dy * (y - y0)
             t = t0 + t_dx * (c_low - x0) + t_dy * (y - y0)
-            s_fixed = np.int64(s * 65536.0 + 0.5)
-            t_fixed = np.int64(t * 65536.0 + 0.5)
-            s_step = np.int64(s_dx * 65536.0 + 0.5)
-            t_step = np.int64(t_dx * 65536.0 + 0.5)
-            for c in range(c_low, c_high + 1):
-                sc = min(max(s_fixed, 0), s_limit)
-                tc = min(max(t_fixed, 0), t_limit)
-                s_fixed += s_step
-                t_fixed += t_step
-                i0 = sc >> 16
-                j0 = tc >> 16
-                wx = ((sc & 0xFFFF) + 128) >> 8
-                wy = ((tc & 0xFFFF) + 128) >> 8
-                i1 = min(i0 + 1, tex_w - 1)
-                j1 = min(j0 + 1, tex_h - 1)
-                top = _lerp_packed(np.int64(texture[j0, i0]), np.int64(texture[j0, i1]), wx)
-                bottom = _lerp_packed(np.int64(texture[j1, i0]), np.int64(texture[j1, i1]), wx)
-                src = _lerp_packed(top, bottom, wy)
-                alpha = src >> 24
-                if alpha == 0:
-                    continue
-                if alpha == 255:
-                    out[r, c] = np.uint32(src)
-                    continue
-                # premultiplied over: dst * (255 - alpha) / 255 + src, per packed channel pair
-                keep = 255 - alpha
-                keep += keep >> 7  # 0..255 -> 0..256
-                dst = np.int64(out[r, c])
-                rb = ((((dst & 0x00FF00FF) * keep + 0x00800080) >> 8) & 0x00FF00FF) + (
-                    src & 0x00FF00FF)
-                ga = (((((dst >> 8) & 0x00FF00FF) * keep + 0x00800080) >> 8) & 0x00FF00FF) + (
-                    (src >> 8) & 0x00FF00FF)
-                out[r, c] = np.uint32(rb | (ga << 8))
+            _draw_span(out, texture, r, c_low, c_high, np.int64(s * 65536.0 + 0.5),
+                       np.int64(t * 65536.0 + 0.5), np.int64(s_dx * 65536.0 + 0.5),
+                       np.int64(t_dx * 65536.0 + 0.5))
 
 
 def _packed(rgba: np.ndarray) -> np.ndarray:

@@ -44,6 +44,7 @@ def test_dev_null_drops_the_frames(capsys):
     assert "wrote /dev/null: 6 frames" in capsys.readouterr().out
 
 
+@pytest.mark.slow
 def test_a_record_preview_stays_in_its_folder_whatever_the_action_name(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     (tmp_path / "deep" / "er").mkdir(parents=True)

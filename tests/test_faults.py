@@ -71,7 +71,8 @@ def _video_command(kind: str, out: Path, tmp_path: Path) -> list[str]:
 
 @needs_small_disk
 @pytest.mark.parametrize("kind, suffix", [
-    ("puppet", ".mp4"), ("puppet", ".mkv"),
+    ("puppet", ".mkv"),
+    pytest.param("puppet", ".mp4", marks=pytest.mark.slow),
     pytest.param("perform", ".mp4", marks=pytest.mark.slow),
     pytest.param("demo", ".mkv", marks=pytest.mark.slow)])
 def test_a_full_disk_during_video_output_is_an_error_naming_the_file(kind, suffix, tmp_path):
@@ -83,6 +84,7 @@ def test_a_full_disk_during_video_output_is_an_error_naming_the_file(kind, suffi
     assert f"wrote {out}" not in result.stdout
 
 
+@pytest.mark.slow
 @needs_small_disk
 def test_a_video_that_fits_is_written_and_read_back(tmp_path):
     import cv2
@@ -97,6 +99,7 @@ def test_a_video_that_fits_is_written_and_read_back(tmp_path):
     capture.release()
 
 
+@pytest.mark.slow
 @needs_small_disk
 def test_a_full_disk_for_the_record_preview_is_an_error(tmp_path):
     disk = tmp_path / "disk"
@@ -378,6 +381,7 @@ def test_a_glove_stuck_at_an_absurd_value_plays_nothing(value, tmp_path):
     assert played == [], f"a glove stuck at {value} played {sorted(set(played))}"
 
 
+@pytest.mark.slow
 @needs_small_disk
 def test_a_full_disk_during_png_frames_keeps_the_frames_before_it(tmp_path):
     from PIL import Image

@@ -37,6 +37,7 @@ def test_a_short_pins_sidecar_works_in_sessions_as_in_mop_puppet(tmp_path):
     assert main(["puppet", str(picture), "--show-mesh", str(tmp_path / "mesh.png")]) == 1
 
 
+@pytest.mark.slow
 def test_record_show_stores_a_performance_that_perform_replays(tmp_path, capsys):
     from mop.takes import ActionStream, Take, TakeStore, performer_templates
     performer = TakeStore(tmp_path / "input")
@@ -127,6 +128,7 @@ def picture(path):
         return image.mode, np.asarray(image)
 
 
+@pytest.mark.slow
 def test_transparent_frames_and_the_warning_for_video(tmp_path, caplog):
     path = write_session(tmp_path)                    # an opaque colour background
     opaque, clear = tmp_path / "opaque", tmp_path / "clear"

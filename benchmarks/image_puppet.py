@@ -1,8 +1,10 @@
 """Image puppet figures: build, simulation step and render times for a 512x512 and a
-2048x2048 picture, baked playback fps, baked-vs-simulated deviation, and the renderer choice
-(numba scanline rasteriser vs pyrender/EGL on the same mesh, same process).
+2048x2048 picture, baked playback fps, baked-vs-simulated deviation, the renderer choice
+(numba scanline rasteriser vs pyrender/EGL on the same mesh, same process), and the build time
+of a 12-megapixel photo (a phone's) against reading its JPEG and a flat-colour key.
 
-    python benchmarks/image_puppet.py [--quick]
+    python benchmarks/image_puppet.py [--quick] [--only photo | accuracy]
+    python benchmarks/image_puppet.py --pictures docs/img      # the guide's pictures
 
 Pictures: the shipped sample character (characters/assets/momo.png, 512x512) and the same picture
 upscaled to 2048x2048 (meshed on a 1024 copy, rendered at full size). Motion: its 4 s wave
@@ -31,14 +33,16 @@ DATA = Path(characters.__file__).parent / "assets"
 FPS = 25.0
 
 
-def timed(function, repeats: int) -> np.ndarray:
-    """Seconds per call over `repeats` calls (after one warm-up call)."""
+def timed(function, repeats: int, clock=time.perf_counter) -> np.ndarray:
+    """Seconds per call over `repeats` calls (after one warm-up call). With
+    `clock=time.process_time`: CPU seconds of this process (all threads), what the wall time
+    would be on an idle core when other work shares the machine."""
     function()
     times = np.empty(repeats)
     for i in range(repeats):
-        start = time.perf_counter()
+        start = clock()
         function()
-        times[i] = time.perf_counter() - start
+        times[i] = clock() - start
     return times
 
 
@@ -200,17 +204,130 @@ def bench_size(picture, label: str, repeats: int, *, compare_gl: bool) -> None:
          f"= {1 / np.median(live):.0f} fps ({np.median(live) / np.median(play):.1f}x baked)")
 
 
+def phone_photo(folder: Path) -> Path:
+    """A 12-megapixel JPEG (4000x3000, quality 90) like a phone's: a real photograph
+    (scikit-image's coffee, upscaled) cut to a character's silhouette over a backdrop lit
+    30 % brighter on one side, with sensor noise (the pictures the tests build)."""
+    import cv2
+    from PIL import Image
+    kit = picture_kit()
+    rng = np.random.default_rng(7)
+    photo = cv2.resize(kit.photo("coffee"), (4000, 3000), interpolation=cv2.INTER_CUBIC)
+    truth = kit.creature(rng, 3000, 4000)
+    picture = kit.photo_on_background(rng, photo, truth, colour=(70, 150, 90), gradient=0.3,
+                                      noise=5.0, quality=None)
+    path = folder / "phone_photo.jpg"
+    Image.fromarray(picture).save(path, quality=90)
+    return path
+
+
+def picture_kit():
+    """tests/picture_kit.py: photos on uneven light and pen drawings with known silhouettes."""
+    import sys
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+    import picture_kit as kit
+    return kit
+
+
+def bench_photo(repeats: int) -> None:
+    """Build time of a 12-megapixel photo, from the array and from the JPEG file."""
+    import tempfile
+
+    from characters.image.background import load_image, remove_background
+    with tempfile.TemporaryDirectory() as folder:
+        path = phone_photo(Path(folder))
+        picture = load_image(path)
+        height, width = picture.shape[:2]
+        print(f"\n{width}x{height} photo ({width * height / 1e6:.0f} megapixels, JPEG "
+              f"{path.stat().st_size / 1e6:.1f} MB), target: build <= 1 s")
+        read = timed(lambda: load_image(path), repeats)
+        build = timed(lambda: ImagePuppet.from_image(picture), repeats)
+        build_cpu = np.median(timed(lambda: ImagePuppet.from_image(picture), repeats,
+                                    clock=time.process_time))
+        from_file = timed(lambda: ImagePuppet.from_image(path), repeats)
+        cut = timed(lambda: remove_background(picture), repeats)
+        plain = timed(lambda: remove_background(picture, kind="plain"), repeats)
+    puppet = ImagePuppet.from_image(picture)
+    print(f"  found as {puppet.kind}; mesh {len(puppet.vertices)} vertices (meshed at "
+          f"{puppet.mesh_scale:.3f} x), texture {width}x{height}")
+    line("build (from_image, array)", build, f"(CPU {1e3 * build_cpu:.0f} ms)")
+    line("  of which the cut-out", cut, f"({np.median(cut) / np.median(build):.0%})")
+    line("build from the JPEG file", from_file)
+    line("  reference: reading the JPEG alone", read,
+         f"(build from file = {np.median(from_file) / np.median(read):.1f}x)")
+    line("  reference: a flat-colour key instead", plain,
+         f"(the light field and GrabCut cost {np.median(cut) / np.median(plain):.1f}x it)")
+
+
+def bench_accuracy(seeds: range) -> None:
+    """Cut-out and automatic-pin accuracy on the pictures the tests build, over several seeds:
+    photographs cut to silhouettes over backdrops lit 25-50 % unevenly (noise, JPEG 65-80),
+    pen outlines on paper (vignette, noise, JPEG), stars, stick figures and the horse. Both the
+    photographs and outline shapes used for tuning and those held out are reported."""
+    import time
+
+    from characters.image.background import remove_background
+    from characters.image.skeleton import propose_pins
+    kit = picture_kit()
+    photos = {name: kit.photo(name) for name in kit.TUNING_PHOTOS + kit.HELD_OUT_PHOTOS}
+    photo_iou = {"tuning": [], "held out": []}
+    drawing_iou = {"tuning": [], "held out": []}
+    details_inside = [0, 0]
+    started = time.perf_counter()
+    for seed in seeds:
+        rng = np.random.default_rng(seed)
+        for name, photo in photos.items():
+            group = "held out" if name in kit.HELD_OUT_PHOTOS else "tuning"
+            height, width = photo.shape[:2]
+            for _, truth in kit.silhouettes(rng, height, width):
+                picture = kit.photo_on_background(
+                    rng, photo, truth, colour=kit.backdrop_colour(rng),
+                    gradient=rng.uniform(0.25, 0.5), noise=rng.uniform(3, 8),
+                    quality=int(rng.integers(65, 81)))
+                photo_iou[group].append(kit.iou(remove_background(picture).mask, truth))
+        for ink in kit.INK_NAMES:
+            for shape in kit.TUNING_OUTLINES + kit.HELD_OUT_OUTLINES:
+                group = "held out" if shape in kit.HELD_OUT_OUTLINES else "tuning"
+                outline = kit.outline_shape(rng, shape, 400, 400)
+                picture, truth, details = kit.pen_drawing(
+                    rng, 400, 400, outline=outline, ink=ink,
+                    line_width=int(rng.integers(2, 6)), quality=int(rng.integers(65, 81)),
+                    vignette=rng.uniform(0.2, 0.4))
+                mask = remove_background(picture).mask
+                drawing_iou[group].append(kit.iou(mask, truth))
+                details_inside[0] += bool(np.all(mask[details]))
+                details_inside[1] += 1
+    print(f"\ncut-out accuracy, seeds {seeds.start}-{seeds.stop - 1} "
+          f"({time.perf_counter() - started:.0f} s)")
+    for what, table, target in (("photos", photo_iou, 0.95), ("drawings", drawing_iou, 0.92)):
+        for group, values in table.items():
+            values = np.array(values)
+            print(f"  {what:8s} {group:8s} n={len(values):3d}  IoU mean {values.mean():.4f}  "
+                  f"min {values.min():.4f}  >= {target}: {(values >= target).sum()} of "
+                  f"{len(values)}")
+    print(f"  drawings: details inside the puppet {details_inside[0]} of {details_inside[1]}")
+    worst = {"star": 0.0, "stick figure": 0.0}
+    for seed in seeds:
+        rng = np.random.default_rng(seed)
+        for _ in range(10):
+            for name, (mask, tips) in (("star", kit.star(rng, size=int(rng.integers(200, 600)),
+                                                          points=int(rng.integers(4, 9)))),
+                                       ("stick figure", kit.stick_figure(
+                                           rng, size=int(rng.integers(200, 600))))):
+                worst[name] = max(worst[name], kit.worst_tip(propose_pins(mask), mask, tips))
+    horse = kit.horse()
+    worst["horse"] = kit.worst_tip(propose_pins(horse), horse, kit.HORSE_TIPS)
+    print("  automatic pins, the farthest limb tip from its pin (x the figure's size): "
+          + ", ".join(f"{name} {value:.3f}" for name, value in worst.items())
+          + f" (target <= 0.05; {10 * len(seeds)} stars and stick figures)")
+
+
 def make_pictures(folder: Path) -> None:
-    """The README pictures: the built mesh with pins, frames of a pulled puppet, materials and
-    modes side by side, and a real photograph cut out over a noisy green background."""
+    """The guide's pictures: frames of a pulled puppet, materials and modes side by side,
+    each kind of input and what it becomes, automatic pins."""
     from PIL import Image, ImageDraw
 
-    from mop.export import over_colour
-    from mop.render.image2d import draw_mesh_preview, puppet_preview
-
     folder.mkdir(parents=True, exist_ok=True)
-    puppet, _ = load_puppet(str(DATA / "momo.png"))
-    Image.fromarray(puppet_preview(puppet)).save(folder / "image_mesh.png", optimize=True)
 
     def pulled(material="rubber", mode="springs"):
         p = ImagePuppet.from_image(DATA / "momo.png", material=material, mode=mode)
@@ -255,28 +372,113 @@ def make_pictures(folder: Path) -> None:
     tiles.append(tile(p, shapes[12], "arap", goal))
     strip(tiles).save(folder / "image_materials.png", optimize=True)
 
-    # a real photograph (public-domain portrait shipped with matplotlib) cut out of a noisy
-    # green background: picture, kept mask outline, mesh
-    import cv2
-    import matplotlib.cbook as cbook
-    from characters.image.background import load_image
-    photo = load_image(cbook.get_sample_data("grace_hopper.jpg", asfileobj=False))
-    height, width = photo.shape[:2]
-    truth = np.zeros((height, width), np.uint8)
-    cv2.ellipse(truth, (width // 2, height // 2 - 10), (width // 3, height // 2 - 40), 0, 0, 360,
-                1, -1)
-    rng = np.random.default_rng(4)
-    background = np.clip(np.array([40, 200, 60]) + rng.normal(0, 8, photo.shape), 0, 255)
-    picture = np.where(truth[:, :, None] > 0, photo, background).astype(np.uint8)
-    cut = ImagePuppet.from_image(picture)
-    preview = draw_mesh_preview(cut.image, cut.vertices, cut.triangles, contour=cut.contour,
-                                dim=0.15)
-    panel = np.concatenate([picture, over_colour(cut.image, "#ffffff"), preview], axis=1)
-    Image.fromarray(panel).resize((panel.shape[1] // 2, panel.shape[0] // 2),
-                                  Image.LANCZOS).save(folder / "image_photo.png", optimize=True)
-    for name in ("image_mesh", "image_pull", "image_materials", "image_photo"):
+    input_kinds(folder)
+    automatic_pins(folder)
+    for name in ("image_pull", "image_materials", "image_inputs", "image_pins"):
         size = (folder / f"{name}.png").stat().st_size // 1024
         print(f"wrote {folder / name}.png ({size} KB)")
+
+
+def _tiles_row(tiles, size=200):
+    """Pictures (H, W, 3) uint8 side by side, each fitted into a size x size square."""
+    import cv2
+    row = []
+    for tile in tiles:
+        scale = size / max(tile.shape[:2])
+        fitted = cv2.resize(tile, (round(tile.shape[1] * scale), round(tile.shape[0] * scale)),
+                            interpolation=cv2.INTER_AREA)
+        square = np.full((size, size, 3), 255, np.uint8)
+        top, left = (size - fitted.shape[0]) // 2, (size - fitted.shape[1]) // 2
+        square[top:top + fitted.shape[0], left:left + fitted.shape[1]] = fitted
+        row.append(square)
+    return np.concatenate(row, axis=1)
+
+
+def _save_small(picture: np.ndarray, path: Path) -> None:
+    """A PNG of 256 colours (a third of the size; the guide's pictures do not need more)."""
+    from PIL import Image
+    Image.fromarray(picture).quantize(256, method=Image.Quantize.MEDIANCUT).save(
+        path, optimize=True)
+
+
+def _checker(shape, cell=12) -> np.ndarray:
+    ys, xs = np.indices(shape[:2])
+    light = ((ys // cell + xs // cell) % 2).astype(bool)
+    return np.where(light[:, :, None], 235, 200).astype(np.uint8).repeat(3, axis=2)
+
+
+def _became(puppet) -> np.ndarray:
+    """The cut-out over a checkerboard (transparency shows)."""
+    alpha = puppet.image[:, :, 3:4].astype(np.float32) / 255.0
+    return (puppet.image[:, :, :3] * alpha + _checker(puppet.image.shape) * (1 - alpha)).astype(
+        np.uint8)
+
+
+def _mesh_close_up(puppet) -> np.ndarray:
+    """The mesh preview cropped to the mesh, with a margin."""
+    from mop.render.image2d import puppet_preview
+    preview = puppet_preview(puppet)
+    low = np.floor(puppet.vertices.min(axis=0) - 0.05 * puppet.mask.shape[1]).astype(int)
+    high = np.ceil(puppet.vertices.max(axis=0) + 0.05 * puppet.mask.shape[1]).astype(int)
+    low = np.maximum(low, 0)
+    return np.ascontiguousarray(preview[low[1]:high[1], low[0]:high[0]])
+
+
+def input_kinds(folder: Path) -> None:
+    """image_inputs.png: each kind of picture (rows) as given, what it becomes (the cut-out
+    over a checkerboard) and its mesh with the automatic pins."""
+    import cv2
+
+    from characters.image.background import load_image
+    kit = picture_kit()
+    rng = np.random.default_rng(11)
+    rows = []
+    photo = kit.photo("astronaut")
+    truth = kit.creature(rng, 512, 512)
+    rows.append(("a photo, lamp on one side (gradient 40 %)", kit.photo_on_background(
+        rng, photo, truth, colour=(200, 170, 90), gradient=0.4, noise=6, quality=70)))
+    cat = kit.photo("chelsea")
+    truth = kit._fill(kit.blob(rng, *cat.shape[:2]), *cat.shape[:2])
+    rows.append(("a toy on a table, its shadow", kit.photo_on_background(
+        rng, cat, truth, colour=(120, 150, 200), gradient=0.3, noise=5, quality=75,
+        shadow=0.45)))
+    outline = kit.outline_shape(rng, "bear", 400, 400)
+    drawing, _, _ = kit.pen_drawing(rng, 400, 400, outline=outline, ink="brown", line_width=3,
+                                    vignette=0.35, quality=70)
+    rows.append(("a pen drawing on paper, vignette", drawing))
+    outline = kit.outline_shape(rng, "ghost", 400, 400)
+    gapped, _, _ = kit.pen_drawing(rng, 400, 400, outline=outline, ink="blue", line_width=3,
+                                   vignette=0.3, quality=75, gap=40)
+    rows.append(("an outline left open: the strokes alone", gapped))
+    momo = load_image(DATA / "momo.png")
+    rows.append(("a cartoon on a flat colour", momo))
+    rows.append(("a cut-out with alpha", ImagePuppet.from_image(momo).image))
+    tiles = []
+    for label, picture in rows:
+        puppet = ImagePuppet.from_image(picture)
+        puppet.add_auto_pins()
+        shown = picture if picture.shape[2] == 3 else _became(ImagePuppet.from_image(picture))
+        tile = _tiles_row([shown, _became(puppet), _mesh_close_up(puppet)], size=220)
+        cv2.putText(tile, f"{label} -> {puppet.kind}", (6, 16), cv2.FONT_HERSHEY_SIMPLEX, 0.42,
+                    (20, 20, 20), 1, cv2.LINE_AA)
+        tiles.append(tile)
+    _save_small(np.concatenate(tiles, axis=0), folder / "image_inputs.png")
+
+
+def automatic_pins(folder: Path) -> None:
+    """image_pins.png: the automatic pins of a star, a stick figure and a horse."""
+    from mop.render.image2d import puppet_preview
+    kit = picture_kit()
+    rng = np.random.default_rng(2)
+    masks = [kit.star(rng, size=360)[0], kit.stick_figure(rng, size=360)[0], kit.horse()]
+    previews = []
+    for mask in masks:
+        picture = np.where(mask[:, :, None], np.array([70, 90, 160], np.uint8),
+                           np.array([250, 250, 250], np.uint8))
+        puppet = ImagePuppet.from_image(picture)
+        puppet.add_auto_pins()
+        previews.append(puppet_preview(puppet))
+    _save_small(_tiles_row(previews, size=300), folder / "image_pins.png")
 
 
 def main() -> None:
@@ -284,13 +486,22 @@ def main() -> None:
     parser.add_argument("--quick", action="store_true", help="fewer repeats")
     parser.add_argument("--no-gl", action="store_true", help="skip the pyrender comparison")
     parser.add_argument("--pictures", type=Path, metavar="DIR",
-                        help="only write the README pictures into DIR (docs/img)")
+                        help="only write the guide's pictures into DIR (docs/img)")
+    parser.add_argument("--only", choices=("photo", "accuracy"),
+                        help="only the 12-megapixel photo's build time, or only the cut-out's "
+                             "and automatic pins' accuracy")
     args = parser.parse_args()
     if args.pictures:
         make_pictures(args.pictures)
         return
     from PIL import Image
     repeats = 30 if args.quick else 200
+    if args.only == "photo":
+        bench_photo(5 if args.quick else 15)
+        return
+    if args.only == "accuracy":
+        bench_accuracy(range(2) if args.quick else range(10))
+        return
     small = np.asarray(Image.open(DATA / "momo.png"))
     big = np.asarray(Image.open(DATA / "momo.png").resize((2048, 2048), Image.LANCZOS))
     print(f"image puppet benchmark (numba threads {os.environ['NUMBA_NUM_THREADS']}, "
@@ -298,6 +509,7 @@ def main() -> None:
     bench_size(small, "512x512 picture", repeats, compare_gl=not args.no_gl)
     bench_size(big, "2048x2048 picture (meshed at 1024, rendered at 2048)", max(10, repeats // 5),
                compare_gl=not args.no_gl)
+    bench_photo(5 if args.quick else 15)
 
 
 if __name__ == "__main__":

@@ -99,6 +99,69 @@ class SpringPlan:
         return np.ascontiguousarray(np.asarray(values)[self.order])
 
 
+def _checked_positions(positions) -> np.ndarray:
+    x = np.array(positions, dtype=np.float64)
+    if x.ndim != 2 or x.shape[1] not in (2, 3):
+        raise ValueError(f"positions must have shape (N, 2) or (N, 3), got {x.shape}")
+    if x.shape[0] == 0:
+        raise ValueError("positions must hold at least one node, got 0")
+    if not np.all(np.isfinite(x)):
+        raise ValueError("positions must be finite, got NaN or inf")
+    return x
+
+
+def _checked_springs(springs, node_count: int) -> np.ndarray:
+    """(M, 2) int32 node pairs: integers (or integral floats) in range, no self-loops."""
+    s = np.asarray(springs)
+    if s.size == 0:
+        s = np.zeros((0, 2), dtype=np.int64)
+    if s.ndim != 2 or s.shape[1] != 2:
+        raise ValueError(f"springs must have shape (M, 2), got {s.shape}")
+    if not (np.issubdtype(s.dtype, np.integer)):
+        if np.issubdtype(s.dtype, np.floating) and np.all(s == np.round(s)):
+            s = s.astype(np.int64)
+        else:
+            raise TypeError(f"springs must hold integer node indices, got dtype {s.dtype}")
+    s = np.array(s, dtype=np.int32)
+    if s.size and (s.min() < 0 or s.max() >= node_count):
+        bad = int(np.flatnonzero((s < 0).any(1) | (s >= node_count).any(1))[0])
+        raise ValueError(f"spring {bad} joins nodes {tuple(s[bad])}: indices must be in "
+                         f"[0, {node_count}) for {node_count} nodes")
+    self_loops = np.flatnonzero(s[:, 0] == s[:, 1])
+    if self_loops.size:
+        raise ValueError(f"spring {int(self_loops[0])} joins node {int(s[self_loops[0], 0])} "
+                         f"to itself")
+    return s
+
+
+def _checked_gravity(gravity, dim: int) -> np.ndarray:
+    g = np.zeros(dim) if gravity is None else np.array(gravity, dtype=np.float64)
+    if g.shape != (dim,):
+        raise ValueError(f"gravity must have shape ({dim},) for {dim}D positions, got {g.shape}")
+    if not np.all(np.isfinite(g)):
+        raise ValueError(f"gravity must be finite, got {g}")
+    return g
+
+
+def _fixed_mask(fixed, node_count: int) -> np.ndarray:
+    """(N,) bool from a mask or a sequence of node indices (None: nothing fixed)."""
+    fixed_mask = np.zeros(node_count, dtype=bool)
+    if fixed is None:
+        return fixed_mask
+    f = np.asarray(fixed)
+    if f.dtype == bool:
+        if f.shape != (node_count,):
+            raise ValueError(f"fixed as a mask must have shape ({node_count},), got {f.shape}")
+        fixed_mask[:] = f
+        return fixed_mask
+    f = f.astype(np.int64).ravel()
+    if f.size and (f.min() < 0 or f.max() >= node_count):
+        raise ValueError(f"fixed node indices must be in [0, {node_count}), got "
+                         f"{f[(f < 0) | (f >= node_count)][0]}")
+    fixed_mask[f] = True
+    return fixed_mask
+
+
 class MassSpring:
     """A mass-spring system: rest positions, springs, masses, damping, gravity, fixed nodes.
 
@@ -121,34 +184,9 @@ class MassSpring:
     def __init__(self, positions, springs, *, stiffness, damping=0.0, mass=1.0, gravity=None,
                  velocity_damping: float = 0.0, rest_length=None, fixed=None,
                  constraints: Sequence = ()):
-        x = np.array(positions, dtype=np.float64)
-        if x.ndim != 2 or x.shape[1] not in (2, 3):
-            raise ValueError(f"positions must have shape (N, 2) or (N, 3), got {x.shape}")
-        if x.shape[0] == 0:
-            raise ValueError("positions must hold at least one node, got 0")
-        if not np.all(np.isfinite(x)):
-            raise ValueError("positions must be finite, got NaN or inf")
+        x = _checked_positions(positions)
         node_count, dim = x.shape
-
-        s = np.asarray(springs)
-        if s.size == 0:
-            s = np.zeros((0, 2), dtype=np.int64)
-        if s.ndim != 2 or s.shape[1] != 2:
-            raise ValueError(f"springs must have shape (M, 2), got {s.shape}")
-        if not (np.issubdtype(s.dtype, np.integer)):
-            if np.issubdtype(s.dtype, np.floating) and np.all(s == np.round(s)):
-                s = s.astype(np.int64)
-            else:
-                raise TypeError(f"springs must hold integer node indices, got dtype {s.dtype}")
-        s = np.array(s, dtype=np.int32)
-        if s.size and (s.min() < 0 or s.max() >= node_count):
-            bad = int(np.flatnonzero((s < 0).any(1) | (s >= node_count).any(1))[0])
-            raise ValueError(f"spring {bad} joins nodes {tuple(s[bad])}: indices must be in "
-                             f"[0, {node_count}) for {node_count} nodes")
-        self_loops = np.flatnonzero(s[:, 0] == s[:, 1])
-        if self_loops.size:
-            raise ValueError(f"spring {int(self_loops[0])} joins node {int(s[self_loops[0], 0])} "
-                             f"to itself")
+        s = _checked_springs(springs, node_count)
         spring_count = s.shape[0]
 
         if rest_length is None:
@@ -165,30 +203,12 @@ class MassSpring:
             bad = int(np.flatnonzero(masses == 0)[0])
             raise ValueError(f"mass must be > 0, got 0 for node {bad} (use fixed= to pin a node)")
 
-        g = np.zeros(dim) if gravity is None else np.array(gravity, dtype=np.float64)
-        if g.shape != (dim,):
-            raise ValueError(
-                f"gravity must have shape ({dim},) for {dim}D positions, got {g.shape}")
-        if not np.all(np.isfinite(g)):
-            raise ValueError(f"gravity must be finite, got {g}")
+        g = _checked_gravity(gravity, dim)
         vd = float(velocity_damping)
         if not np.isfinite(vd) or vd < 0:
             raise ValueError(f"velocity_damping must be a finite rate >= 0 [1/s], got {vd}")
 
-        fixed_mask = np.zeros(node_count, dtype=bool)
-        if fixed is not None:
-            f = np.asarray(fixed)
-            if f.dtype == bool:
-                if f.shape != (node_count,):
-                    raise ValueError(
-                        f"fixed as a mask must have shape ({node_count},), got {f.shape}")
-                fixed_mask[:] = f
-            else:
-                f = f.astype(np.int64).ravel()
-                if f.size and (f.min() < 0 or f.max() >= node_count):
-                    raise ValueError(f"fixed node indices must be in [0, {node_count}), got "
-                                     f"{f[(f < 0) | (f >= node_count)][0]}")
-                fixed_mask[f] = True
+        fixed_mask = _fixed_mask(fixed, node_count)
 
         self.rest_positions = _readonly(x)
         self.springs = _readonly(s)

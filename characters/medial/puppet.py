@@ -221,34 +221,25 @@ class MedialObject:
         node_mass = float(mass) / vertex_count
         stiffness = material.stiffness * node_mass
 
-        constraints = []
-        if len(dyn):
-            if constraint is ConstraintMethod.CIRCUMSPHERE:
-                # radius (f_max - 1) L: see docs/medial_objects.md for why not f_max L
-                radius = (material.max_factor - 1.0) * self.bone_rest_length[dyn]
-                constraints.append(CircumsphereConstraint(dyn, radius=radius, name="medial_sphere"))
-            else:
-                # the core's SpringReductionConstraint on the bone springs, computed per mass
-                # point with an early stop (same results, tested; see medial/constraints)
-                constraints.append(BoneSpringReduction(
-                    dyn, vertex_count + dyn, 2 * vertex_count + dyn, self.bone_rest_length[dyn],
-                    min_factor=material.min_factor, max_factor=material.max_factor,
-                    iterations=iterations))
+        constraints = _bone_constraints(constraint, material, dyn, vertex_count,
+                                        self.bone_rest_length[dyn], iterations)
         self.model = MassSpring(positions, springs, stiffness=stiffness, mass=node_mass,
                                 velocity_damping=material.velocity_damping,
                                 rest_length=rest_length, fixed=fixed, constraints=constraints)
         self.state = self.model.state()
 
-        # explicit stability: h < 2 / omega_max, omega_max^2 <= 2 max_i sum_j k_ij / m_i
-        incident = np.zeros(3 * vertex_count)
-        np.add.at(incident, springs[:, 0], self.model.stiffness)
-        np.add.at(incident, springs[:, 1], self.model.stiffness)
-        omega_max = math.sqrt(2.0 * float(incident[dyn].max(initial=0.0)) / node_mass)
-        self.max_substep = 0.8 * 2.0 / omega_max if omega_max > 0 else math.inf   # [s]
+        self.max_substep = _stable_substep(self.model, dyn, node_mass)   # [s]
         self.fixed_substeps = substeps
         self.integrator = Verlet(substeps=1, check_energy=False)
 
-        # rest arrays the joints transform each step
+        self._prepare_joints(positions, rest, fixed, dyn, constraints)
+        for array in (self.rest_vertices, self.skeleton, self.bone_rest_length,
+                      self.dynamic_vertices, self.kinematic_vertices):
+            array.setflags(write=False)
+
+    def _prepare_joints(self, positions, rest, fixed, dyn, constraints) -> None:
+        """The rest arrays the joints transform each step, and the per-section buffers."""
+        joints = self.joints
         section_of_node = np.concatenate([joints.section_of_vertex] * 3).astype(np.int64)
         self._kinematic_nodes = np.flatnonzero(fixed)
         self._kinematic_rest = np.ascontiguousarray(positions[self._kinematic_nodes])
@@ -265,9 +256,6 @@ class MedialObject:
         centers = {c.name: self._centers for c in constraints
                    if isinstance(c, CircumsphereConstraint)}
         self._control = Control(constraint_centers=centers)
-        for array in (self.rest_vertices, self.skeleton, self.bone_rest_length,
-                      self.dynamic_vertices, self.kinematic_vertices):
-            array.setflags(write=False)
 
     # construction ----------------------------------------------------------------------------
     @classmethod
@@ -433,3 +421,28 @@ class MedialObject:
         return (f"MedialObject({self.vertex_count} vertices, {self.model.spring_count} springs, "
                 f"material={self.material.name!r}, constraint={self.constraint.value!r}, "
                 f"sections={list(self.joints.names)})")
+
+
+def _bone_constraints(constraint, material, dyn, vertex_count, bone_rest, iterations) -> list:
+    """The medial constraint on the dynamic vertices' bone springs (none when nothing moves)."""
+    if not len(dyn):
+        return []
+    if constraint is ConstraintMethod.CIRCUMSPHERE:
+        # radius (f_max - 1) L: see docs/medial_objects.md for why not f_max L
+        radius = (material.max_factor - 1.0) * bone_rest
+        return [CircumsphereConstraint(dyn, radius=radius, name="medial_sphere")]
+    # the core's SpringReductionConstraint on the bone springs, computed per mass point with an
+    # early stop (same results, tested; see medial/constraints)
+    return [BoneSpringReduction(dyn, vertex_count + dyn, 2 * vertex_count + dyn, bone_rest,
+                                min_factor=material.min_factor, max_factor=material.max_factor,
+                                iterations=iterations)]
+
+
+def _stable_substep(model, dyn, node_mass: float) -> float:
+    """The largest stable Verlet substep [s], with a 0.8 margin: h < 2 / omega_max, where
+    omega_max^2 <= 2 max_i sum_j k_ij / m_i over the dynamic vertices."""
+    incident = np.zeros(model.node_count)
+    np.add.at(incident, model.springs[:, 0], model.stiffness)
+    np.add.at(incident, model.springs[:, 1], model.stiffness)
+    omega_max = math.sqrt(2.0 * float(incident[dyn].max(initial=0.0)) / node_mass)
+    return 0.8 * 2.0 / omega_max if omega_max > 0 else math.inf

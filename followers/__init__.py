@@ -20,6 +20,8 @@ __getattr__, __dir__, __all__ = lazy_loader.attach(__name__, submod_attrs={
                       "fill_gaps", "time_warp"],
     # defaults estimated from templates
     "defaults": ["default_sigma", "default_window"],
+    # several takes of one action as one template and its spread
+    "demos": ["combine", "Demonstrations"],
     # training from several demonstrations
     "training": ["train_hmm", "train_follower", "TrainedModel"],
     # feedback after recording

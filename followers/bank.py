@@ -21,7 +21,8 @@ from followers import _bank_kernels
 from followers.bank_model import (bank_sigmas, bank_state, build_bank_model, check_size,
                                   reset_bank)
 from followers.config import BankConfig, FollowerConfig
-from followers.defaults import as_sigma, as_template, as_window, default_window
+from followers.defaults import as_sigma, as_window, default_window
+from followers.demos import Demonstrations, combine
 from followers.follower import Follower, adaptation, chain, resolve_config
 from followers.model import build_forward, check_frame, forward_state, reset_forward
 
@@ -110,36 +111,39 @@ class BankOutput:
                 f"threshold={self.threshold:.2f}, outlier={self.outlier})")
 
 
-def _named_templates(templates) -> tuple[list[str], list[np.ndarray], list]:
-    """Names, validated (T_k, D) arrays and each one's own sigma (a ``Follower`` value's
-    given sigma, else None) from a mapping or a sequence of pairs."""
+def _named_actions(templates, config: BankConfig):
+    """Names, each action's takes combined (``followers.demos.combine``) and each one's own
+    sigma (a ``Follower`` value's given sigma, else None), from a mapping or a sequence of
+    pairs; a value is one take (an array), several (a list of arrays) or a ``Follower``."""
     items = list(templates.items()) if isinstance(templates, Mapping) else list(templates)
     if not items:
         raise ValueError("a FollowerBank needs at least one template, got none")
-    names, arrays, own, seen = [], [], [], set()
+    names, actions, own, seen = [], [], [], set()
     for entry in items:
         if not (isinstance(entry, tuple) and len(entry) == 2):
-            raise TypeError("templates must be a mapping {name: (T, D) array} or a sequence of "
-                            f"(name, array) pairs, got an item {type(entry).__name__}")
-        name, template = entry
+            raise TypeError("templates must be a mapping {name: (T, D) array or list of them} or "
+                            f"a sequence of (name, array) pairs, got an item "
+                            f"{type(entry).__name__}")
+        name, takes = entry
         if not isinstance(name, str):
             raise TypeError(f"action names must be str, got {name!r}")
         if name in seen:
             raise ValueError(f"action name {name!r} appears twice")
         seen.add(name)
         names.append(name)
-        if isinstance(template, Follower):
-            arrays.append(np.array(template.template))
-            own.append(template.sigma if template.sigma_given else None)
+        if isinstance(takes, Follower):
+            actions.append(takes.demonstrations or combine(np.array(takes.template),
+                                                           name=f"template {name!r}"))
+            own.append(takes.sigma if takes.sigma_given else None)
         else:
-            arrays.append(as_template(template, name=f"template {name!r}"))
+            actions.append(combine(takes, config=config.follower, name=f"template {name!r}"))
             own.append(None)
-    D = arrays[0].shape[1]
-    for name, arr in zip(names, arrays):
-        if arr.shape[1] != D:
+    D = actions[0].template.shape[1]
+    for name, action in zip(names, actions):
+        if action.template.shape[1] != D:
             raise ValueError(f"every template needs the same channels: {names[0]!r} has {D}, "
-                             f"{name!r} has {arr.shape[1]}")
-    return names, arrays, own
+                             f"{name!r} has {action.template.shape[1]}")
+    return names, actions, own
 
 
 def _given_sigmas(sigma, names, arrays) -> list[np.ndarray]:
@@ -169,11 +173,15 @@ def resolve_bank_config(config, transitions, reject_margin) -> BankConfig:
 class FollowerBank:
     """Recognises which of several recorded actions a performer is doing, and how far along.
 
-    templates : {name: (T_k, D) float or Follower} (or a sequence of (name, value) pairs): one
-        template per action, all with the same D channels [input units]. A ``Follower`` (one
-        from ``train_follower``, say) gives its template and, if it was given one, its
-        per-state sigma as that action's base sigma, floored at the bank's default; the
-        bank's scales apply to it as to the default.
+    templates : {name: (T_k, D) float, a list of such arrays, or a Follower} (or a sequence of
+        (name, value) pairs): per action one take or several, all with the same D channels
+        [input units]. Several takes of an action become one template, their average, whose
+        default sigma is widened per state by how far the takes stray from it
+        (``followers.demos``); the bank's cost per frame is that of one template per action.
+        A ``Follower`` (one from ``train_follower``, say) gives its template (its takes, if it
+        was made from several) and, if it was given one, its per-state sigma as that action's
+        base sigma, floored at the bank's default; the bank's scales apply to it as to the
+        default.
     sigma : float or (D,) for every action, or {name: float, (D,) or (T_k, D)}, optional [input
         units]: the emission sigma of both the forward recursion and the recognition score,
         used as given. Default: multiples of each action's base sigma (the default estimated
@@ -189,16 +197,17 @@ class FollowerBank:
 
     def __init__(self, templates, *, sigma=None, window=None, transitions=None,
                  reject_margin=None, config: BankConfig | None = None):
-        names, arrays, own = _named_templates(templates)
         self.config = config = resolve_bank_config(config, transitions, reject_margin)
         fc = config.follower
+        names, actions, own = _named_actions(templates, config)
+        arrays = [a.template for a in actions]
         model = chain(fc, transitions)
         check_size(arrays, config, levels=model.levels, resolution=model.resolution)
         K = len(arrays)
         defaults = sigma is None
         recognition = exact = None
         if defaults:
-            sigmas, recognition, exact = bank_sigmas(arrays, config, own)
+            sigmas, recognition, exact = bank_sigmas(actions, config, own)
             if model.kind == "mop":  # the paper's chain scores frames as the paper does
                 recognition = exact = None
         else:
@@ -217,8 +226,9 @@ class FollowerBank:
             adaptation=adaptation(fc, fc.adapt_sigma and defaults and model.kind != "mop"),
             report_adaptation=adaptation(fc, defaults))
         self._exact = np.ones((K, arrays[0].shape[1])) if exact is None else exact
+        self._demonstrations = actions
         self._model = build_bank_model(
-            arrays, config, resolution=self._forward.resolution, restart=self._forward.restart,
+            actions, config, resolution=self._forward.resolution, restart=self._forward.restart,
             subframe=fc.subframe, mixture=config.mixture_start if exact is not None else 0.0)
         self._state = forward_state(self._forward)
         self._bank = bank_state(self._model)
@@ -261,7 +271,12 @@ class FollowerBank:
         return np.array(self._sigmas[self._index[action]])
 
     def template(self, action: str) -> np.ndarray:
+        """(T, D) float: the template of one action (its takes' average when several)."""
         return self._templates[self._index[action]].copy()
+
+    def demonstrations(self, action: str) -> Demonstrations:
+        """One action's takes combined: its template, their spread, how consistent they are."""
+        return self._demonstrations[self._index[action]]
 
     @property
     def thresholds(self) -> np.ndarray:

@@ -7,11 +7,13 @@ every frame (``BankState``), read and written by ``_bank_kernels``.
   ``recognition_scale`` (floored at ``recognition_floor`` of each template's own channel
   spread) for the recognition score, with an exact-repetition component as narrow as each
   template's own noise.
-- The background model: one Gaussian over every frame of every template ("some pose of this
+- The background model: one Gaussian over every frame of every take ("some pose of this
   performer"), against which the rejection's fit is measured.
 - The outline models: per action a coarse left-to-right HMM of ``outline_states`` states over
-  equal stretches of its template, each a diagonal Gaussian with the stretch's mean and
-  variance.
+  equal stretches of its takes, each a diagonal Gaussian with the mean and variance of that
+  stretch of every take.
+- An action demonstrated several times (``followers.demos``) is one template, their average;
+  the spread of its takes widens both sigmas per state.
 """
 from __future__ import annotations
 
@@ -21,7 +23,7 @@ from typing import NamedTuple
 import numpy as np
 
 from followers.config import BankConfig
-from followers.defaults import exact_scales, pooled_sigma, recognition_sigma
+from followers.defaults import exact_scales, noise_sigmas, pooled_sigma, recognition_sigma
 
 
 class BankModel(NamedTuple):
@@ -114,63 +116,101 @@ def segment_moments(stacked: np.ndarray, starts: np.ndarray):
     return mean, np.add.reduceat(centred * centred, starts, axis=0) / counts
 
 
-def bank_sigmas(arrays: list[np.ndarray], config: BankConfig, own=None):
+def pooled_moments(mean: np.ndarray, variance: np.ndarray, counts: np.ndarray,
+                   owner: np.ndarray, K: int):
+    """(mean, variance), each (K, ...), of groups of segments pooled: segment ``i`` (its
+    ``mean``, ``variance`` and ``counts`` rows, leading axis) belongs to group ``owner[i]``."""
+    total = np.zeros((K,) + counts.shape[1:])
+    np.add.at(total, owner, counts)
+    first = np.zeros((K,) + mean.shape[1:])
+    second = np.zeros_like(first)
+    np.add.at(first, owner, counts * mean)
+    np.add.at(second, owner, counts * (variance + mean * mean))
+    first /= total
+    return first, np.maximum(second / total - first * first, 0.0)
+
+
+def bank_sigmas(actions: list, config: BankConfig, own=None):
     """(following, recognition, exact) sigmas of the default emission models: K (T_k, D)
     sigmas for the recursion, K for the recognition score, and the exact-repetition
     component's (K, D) scale relative to the following sigma (None: no mixture).
 
+    actions : K ``followers.demos.Demonstrations``, one take each or several. An action of
+    several takes adds their spread (``FollowerConfig.spread_weight`` of its square) to both
+    sigmas per state, and its exact component is as narrow as its takes' own noise.
     own : K (T_k, D) sigmas or None (a trained follower's per-state spread, say): that
     action's base sigma, floored at the pooled default; None: the pooled default."""
+    arrays = [a.template for a in actions]
     own = own or [None] * len(arrays)
-    pooled = pooled_sigma(arrays, config.follower)
+    pooled = pooled_sigma([t for a in actions for t in a.takes], config.follower)
     bases = [np.broadcast_to(pooled, a.shape) if o is None else np.maximum(o, pooled)
              for a, o in zip(arrays, own)]
     offsets = np.cumsum([0] + [a.shape[0] for a in arrays[:-1]])
     _, variance = segment_moments(np.concatenate(arrays, axis=0), offsets)
     spread = np.sqrt(variance)
-    sigmas = [config.following_scale * b for b in bases]
-    recognition = [recognition_sigma(s, config.recognition_scale * b, config)
-                   for s, b in zip(spread, bases)]
+    weight = config.follower.spread_weight
+
+    def widened(scale, base, action):
+        sigma = scale * base
+        return sigma if action.count < 2 else np.sqrt(sigma ** 2 + weight * action.spread ** 2)
+
+    sigmas = [widened(config.following_scale, b, a) for b, a in zip(bases, actions)]
+    recognition = [recognition_sigma(s, widened(config.recognition_scale, b, a), config)
+                   for s, b, a in zip(spread, bases, actions)]
     exact = None
     if config.mixture_start > 0.0:
         typical = np.stack([pooled if o is None else np.median(b, axis=0)
                             for o, b in zip(own, bases)])
-        exact = exact_scales(arrays, typical, config.exact_floor)
+        noise = noise_sigmas(arrays)
+        for k, action in enumerate(actions):
+            if action.noise is not None:
+                noise[k] = action.noise
+        exact = exact_scales(noise, typical, config.exact_floor)
         exact /= config.following_scale
     return sigmas, recognition, exact
 
 
 def outline_models(stacked: np.ndarray, lengths: np.ndarray, states: int,
-                   config: BankConfig):
-    """Every template's outline model: ``(mean, variance)``, each (K, states, D), from
-    ``states`` equal stretches of each template (the first ``T % states`` a frame longer;
-    every T >= states); ``stacked (sum T_k, D)``: the templates one above the other."""
-    K, D = lengths.shape[0], stacked.shape[1]
+                   config: BankConfig, owner: np.ndarray | None = None):
+    """Every action's outline model: ``(mean, variance)``, each (K, states, D), from
+    ``states`` equal stretches of each take (the first ``T % states`` a frame longer; every
+    T >= states), stretch ``j`` of an action's takes pooled; ``stacked (sum T_i, D)``: the
+    takes one above the other, ``lengths`` theirs, ``owner`` each take's action (None: one
+    take per action)."""
+    n, D = lengths.shape[0], stacked.shape[1]
     offsets = np.cumsum(np.append(0, lengths[:-1]))
     q, r = np.divmod(lengths, states)
     i = np.arange(states)
     starts = (offsets[:, None] + i * q[:, None] + np.minimum(i, r[:, None])).ravel()
     mean, variance = segment_moments(stacked, starts)
-    _, own = segment_moments(stacked, offsets)
+    whole_mean, own = segment_moments(stacked, offsets)
+    mean, variance = mean.reshape(n, states, D), variance.reshape(n, states, D)
+    K = n
+    if owner is not None and owner.shape[0] > int(owner.max()) + 1:
+        K = int(owner.max()) + 1
+        counts = np.diff(np.append(starts, stacked.shape[0])).reshape(n, states, 1)
+        mean, variance = pooled_moments(mean, variance, counts, owner, K)
+        _, own = pooled_moments(whole_mean, own, lengths[:, None].astype(float), owner, K)
     spread = np.maximum(stacked.std(axis=0), 1e-6 * max(1.0, float(np.abs(stacked).max())))
     floor = config.outline_own_variance * own + config.outline_floor * spread ** 2
-    return (mean.reshape(K, states, D),
-            variance.reshape(K, states, D) + floor[:, None, :], spread)
+    return mean, variance + floor[:, None, :], spread
 
 
-def build_bank_model(arrays: list[np.ndarray], config: BankConfig, *, resolution: int,
+def build_bank_model(actions: list, config: BankConfig, *, resolution: int,
                      restart: tuple[float, float], subframe: bool,
                      mixture: float) -> BankModel:
-    """The bank's model for templates ``arrays`` (K (T_k, D), validated); ``resolution``: the
-    followers' states per template frame; ``restart``: their chain's (from anywhere, from the
-    last state) per frame; ``subframe``: the shown follower reports inside its cells;
-    ``mixture``: the exact component's starting weight (0: no mixture)."""
+    """The bank's model for ``actions`` (K ``followers.demos.Demonstrations``);
+    ``resolution``: the followers' states per template frame; ``restart``: their chain's (from
+    anywhere, from the last state) per frame; ``subframe``: the shown follower reports inside
+    its cells; ``mixture``: the exact component's starting weight (0: no mixture)."""
     c = config
-    K = len(arrays)
-    stacked = np.concatenate(arrays, axis=0)
-    lengths = np.array([a.shape[0] for a in arrays])
-    outline_mean, variance, spread = outline_models(stacked, lengths,
-                                                    min(c.outline_states, lengths.min()), c)
+    K = len(actions)
+    takes = [t for a in actions for t in a.takes]
+    owner = np.repeat(np.arange(K), [a.count for a in actions])
+    lengths = np.array([t.shape[0] for t in takes])
+    stacked = np.concatenate(takes, axis=0)
+    outline_mean, variance, spread = outline_models(
+        stacked, lengths, min(c.outline_states, lengths.min()), c, owner)
     rejecting = math.isfinite(c.reject_margin)
     hysteresis = c.reject_hysteresis if rejecting else 0.0
     idle = max(restart)

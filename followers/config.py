@@ -146,6 +146,9 @@ class FollowerConfig(_Config):
     tempo_exponent: float = _f(0.2, "power", "variance x tempo ** this", low=0.0)
     tempo_memory: float = _f(10.0, "frames", "time constant of the tempo estimate", low=0.0,
                              low_open=True)
+    spread_weight: float = _f(0.3, "x spread squared", "with several demonstrations, their "
+                              "spread around the averaged template enters each state's "
+                              "emission variance with this weight", low=0.0)
 
     def _validate_together(self) -> None:
         if not self.speed_min < self.speed_max:

@@ -118,13 +118,14 @@ def noise_sigmas(templates: list[np.ndarray]) -> np.ndarray:
     return out
 
 
-def exact_scales(templates: list[np.ndarray], sigmas: np.ndarray, floor: float) -> np.ndarray:
-    """(K, D) float: the scale of a bank's exact-repetition component for each template,
-    relative to its default sigma (``sigmas (K, D)``, per channel): the template's own noise
-    per channel, clipped to [``floor``, 1]. A take replayed by its performer differs from the
-    demonstration by about its sensor noise; a channel noisier than the default sigma keeps
-    the default, a nearly noiseless one is floored."""
-    return np.clip(noise_sigmas(templates) / sigmas, floor, 1.0)
+def exact_scales(noise: np.ndarray, sigmas: np.ndarray, floor: float) -> np.ndarray:
+    """(K, D) float: the scale of a bank's exact-repetition component for each action,
+    relative to its default sigma (``sigmas (K, D)``, per channel): its takes' own noise per
+    channel (``noise (K, D)``, see ``noise_sigmas``), clipped to [``floor``, 1]. A take
+    replayed by its performer differs from the demonstration by about its sensor noise; a
+    channel noisier than the default sigma keeps the default, a nearly noiseless one is
+    floored."""
+    return np.clip(noise / sigmas, floor, 1.0)
 
 
 def default_window(length: int, config: FollowerConfig = _DEFAULT) -> int:

@@ -9,6 +9,7 @@ import numpy as np
 from followers import _kernels
 from followers.config import FollowerConfig
 from followers.defaults import as_sigma, as_template, as_window, default_sigma, default_window
+from followers.demos import combine, is_takes
 from followers.model import build_forward, check_frame, forward_state, reset_forward
 from followers.transitions import TransitionModel, transition_model
 
@@ -93,7 +94,9 @@ class Follower:
     """Follows a performer through one recorded action (MOP, section 3.2).
 
     template : (T, D) float [input units], T >= 2 (a (T,) array is one channel): the action as
-        demonstrated, one HMM state per frame.
+        demonstrated, one HMM state per frame; or a list of such arrays, several takes of the
+        action: the template is then their average and the default sigma is widened per state
+        by how far they stray from it (``followers.demos``; ``demonstrations``).
     sigma : float, (D,) or (T, D) float [input units], optional: the Gaussian emission's
         standard deviation. Default: estimated from the template (``followers.defaults``),
         its scale then learned online (``config.adapt_sigma``); a given sigma is used as given.
@@ -107,15 +110,26 @@ class Follower:
 
     def __init__(self, template, *, sigma=None, window=None, transitions=None,
                  config: FollowerConfig | None = None):
-        # our own copies where validation handed back the caller's arrays: the template is
-        # made read-only below, and neither may change under the follower
-        tmpl = _own(as_template(template), template)
         self.config = config = resolve_config(config, transitions, FollowerConfig.preset)
         model = chain(config, transitions)
+        self._demonstrations = None
+        if is_takes(template):
+            self._demonstrations = combine(template, config=config)
+            tmpl = self._demonstrations.template
+        else:
+            # our own copy where validation handed back the caller's array: the template is
+            # made read-only below, and must not change under the follower
+            tmpl = _own(as_template(template), template)
         T, D = tmpl.shape
         given = self._sigma_given = sigma is not None
-        self._sigma = _own(as_sigma(sigma, (T, D)), sigma) if given else default_sigma(
-            tmpl, config=config)
+        if given:
+            self._sigma = _own(as_sigma(sigma, (T, D)), sigma)
+        elif self._demonstrations is None:
+            self._sigma = default_sigma(tmpl, config=config)
+        else:
+            d = self._demonstrations
+            base = default_sigma(tmpl, pooled=list(d.takes), config=config)
+            self._sigma = np.sqrt(base ** 2 + config.spread_weight * d.spread ** 2)
         self._window = default_window(T, config) if window is None else as_window(window, T)
         self._transitions = model
         mop = model.kind == "mop"
@@ -142,6 +156,12 @@ class Follower:
     def template(self) -> np.ndarray:
         """(T, D) float64, read-only."""
         return self._template
+
+    @property
+    def demonstrations(self):
+        """The takes combined (:class:`followers.demos.Demonstrations`) when the follower was
+        made from several, else None."""
+        return self._demonstrations
 
     @property
     def sigma(self) -> np.ndarray:

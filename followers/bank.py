@@ -25,6 +25,7 @@ from followers.defaults import as_sigma, as_window, default_window
 from followers.demos import Demonstrations, combine
 from followers.follower import Follower, adaptation, chain, resolve_config
 from followers.model import build_forward, check_frame, forward_state, reset_forward
+from followers.still import StillWindow, build_still, holds_no_action, still_mask
 
 
 log = logging.getLogger(__name__)
@@ -230,6 +231,9 @@ class FollowerBank:
         self._model = build_bank_model(
             actions, config, resolution=self._forward.resolution, restart=self._forward.restart,
             subframe=fc.subframe, mixture=config.mixture_start if exact is not None else 0.0)
+        self._still = build_still(arrays, [list(a.takes) for a in actions], config.still_frames,
+                                  config.still_band, config.end_fraction)
+        self._still_window = StillWindow(self._still, arrays[0].shape[1])
         self._state = forward_state(self._forward)
         self._bank = bank_state(self._model)
         self._out = BankOutput(self)
@@ -345,6 +349,7 @@ class FollowerBank:
         reset_bank(self._model, self._bank)
         self._state.mixture[0] = self._model.mixture_start
         _bank_kernels.gate(self._state, self._model, self._bank, -1)
+        self._still_window.reset()
         self._publish()
 
     def step(self, x) -> BankOutput:
@@ -353,15 +358,18 @@ class FollowerBank:
         Returns the bank's :class:`BankOutput`, **the same object every call** (fields updated
         in place; ``.copy()`` keeps a snapshot). No array is allocated when ``x`` is already a
         float64 array."""
-        _bank_kernels.bank_step(self._forward.model, self._state, self._model, self._bank,
-                                check_frame(x, self.channels))
-        self._publish()
+        frame = check_frame(x, self.channels)
+        _bank_kernels.bank_step(self._forward.model, self._state, self._model, self._bank, frame)
+        self._publish(self._still_window.push(frame))
         return self._out
 
-    def _publish(self) -> None:
+    def _publish(self, still: bool = False) -> None:
         out, decision = self._out, self._bank.decision
         active = int(decision[0])
         shown = active if active >= 0 else int(decision[1])
+        if still and active >= 0 and holds_no_action(
+                self._still, active, float(self._bank.progress[active])):
+            active = -1  # still input (followers.still): shown as no action
         out.action = self._names[active] if active >= 0 else None
         out.index = active
         out.best = self._names[int(decision[1])]
@@ -383,7 +391,13 @@ class FollowerBank:
         self.reset()
         _bank_kernels.bank_run(self._forward.model, self._state, self._model, self._bank,
                                np.ascontiguousarray(arr), trace)
-        self._publish()
+        still = still_mask(arr, self._still.frames, self._still.band)
+        for i in np.flatnonzero(still):
+            if trace.action[i] >= 0 and holds_no_action(self._still, int(trace.action[i]),
+                                                         float(trace.progress[i])):
+                trace.action[i] = -1
+        self._still_window.load(arr)
+        self._publish(bool(still[-1]) if still.size else False)
         return trace._asdict()
 
     def __repr__(self) -> str:

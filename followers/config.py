@@ -253,6 +253,11 @@ class BankConfig(_Config):
                           "bank is refused, naming its size", low=0.0, low_open=True)
     frame_budget: float = _f(0.04, "seconds", "a bank whose step takes longer (measured once "
                              "when it is large) says so in the log", low=0.0, low_open=True)
+    still_frames: int = _f(0, "frames", "input still this long is no action unless the shown "
+                           "action holds still there (followers.still; 0: off; a session sets "
+                           "it from its still_after)", low=0)
+    still_band: float = _f(0.25, "x channel spread", "still: every channel stays within this "
+                           "times its spread over every take", low=0.0)
 
     def _validate_together(self) -> None:
         if not isinstance(self.follower, FollowerConfig):

@@ -38,7 +38,8 @@ LAYERS = {
     "followers": [
         ["followers._jit", "followers._cells", "followers._kernels", "followers._bank_kernels",
          "followers.config", "followers.defaults", "followers.preprocessing",
-         "followers.transitions", "followers.datasets", "followers.model"],
+         "followers.transitions", "followers.datasets", "followers.model",
+         "followers.still"],
         ["followers.bank_model"],
         ["followers.follower"],
         ["followers.bank", "followers.training"],

@@ -50,8 +50,8 @@ def bank_for(args):
             templates, channels, shift, scale = performer_templates(config, performer, takes,
                                                                     where=str(config.path))
             if set(channels) <= set(target.channels):
-                return (build_bank(templates, performer), config.fps, channels, shift, scale,
-                        list(templates), target)
+                return (build_bank(templates, performer, config.fps), config.fps, channels,
+                        shift, scale, list(templates), target)
         raise ValueError(f"no performer of {config.path} uses the channels of take "
                          f"{args.take!r} ({', '.join(target.channels)})")
     folder = Path(args.takes) if args.takes else default_store()
@@ -69,7 +69,7 @@ def bank_for(args):
     shift, scale = normalisation(list(templates.values()), Normalise.ZSCORE)
     templates = {k: (v - shift) / scale for k, v in templates.items()}
     performer = PerformerConfig(name="plot", source="")
-    return (build_bank(templates, performer), args.fps, target.channels, shift, scale,
+    return (build_bank(templates, performer, args.fps), args.fps, target.channels, shift, scale,
             list(templates), target)
 
 

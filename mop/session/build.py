@@ -141,9 +141,14 @@ def performer_templates(config: SessionConfig, performer: PerformerConfig,
     return templates, tuple(channels), shift, scale
 
 
-def build_bank(templates: Mapping[str, np.ndarray], performer: PerformerConfig):
-    from followers import FollowerBank
+def build_bank(templates: Mapping[str, np.ndarray], performer: PerformerConfig,
+               fps: float | None = None):
+    """The performer's bank; with ``fps``, input still for the performer's ``still_after``
+    is no action (``BankConfig.still_frames``)."""
+    from followers import BankConfig, FollowerBank
     options = {}
+    if fps is not None:
+        options["config"] = BankConfig(still_frames=int(round(performer.still_after * fps)))
     if performer.sigma is not None:
         options["sigma"] = performer.sigma
     if performer.window is not None:
@@ -225,7 +230,7 @@ def build_session(config: SessionConfig, *, mode: Mode | str = Mode.REPLAY,
         say(f"training the followers of {performer.name}")
         templates, channels, shift, scale = performer_templates(config, performer, takes,
                                                                 where=where)
-        bank = build_bank(templates, performer)
+        bank = build_bank(templates, performer, config.fps)
         spec = overrides.replay.get(performer.name, performer.source)
         feed = _feed(spec, performer, store, config, mode=mode, loop=overrides.loop_takes,
                      opener=source_opener, where=where)

@@ -1,0 +1,121 @@
+"""Still input is no action: a performer holding still between gestures.
+
+Left alone, a bank holds the last action at its end, or starts another at its first frames,
+for as long as the performer holds still: nothing in the forward recursion says "none of
+these". This stage looks at the input itself. Input is **still** at a frame when, over the
+last ``BankConfig.still_frames`` frames, every channel stayed within ``still_band`` times that
+channel's spread over every take (a frame with a missing channel is not still). While the
+input is still, the shown action is replaced by "no action" unless the action itself holds
+still there:
+
+- an action whose takes are mostly still (a "stand" or "rest" action) is never replaced;
+- otherwise the action is replaced at its end (progress >= ``end_fraction``), in its
+  still lead-in (where every recording starts before the gesture does), and wherever its
+  template is not still itself; a pause inside a gesture, still in the template too, stays.
+
+The rule only changes what the bank *shows*: the followers, the posterior and the rejection
+go on underneath, so the action comes back as soon as the input moves again and explains it.
+"""
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+from numpy.lib.stride_tricks import sliding_window_view
+
+# an action is a "still action" when more than this share of its takes' frames are still
+STILL_ACTION_SHARE = 0.5
+# the lead-in is protected up to this much progress past its last still frame
+LEAD_MARGIN = 0.02
+
+
+class StillModel(NamedTuple):
+    """What the still stage needs, built once per bank."""
+
+    frames: int              # window length [frames] (0: off)
+    band: np.ndarray         # (D,) float: the largest range per channel that counts as still
+    still_action: np.ndarray  # (K,) bool: the action's takes are mostly still
+    lead: np.ndarray         # (K,) float: progress up to which the template's lead-in is still
+    template_still: list     # K (T_k,) bool: the template is still at this frame
+    end: float               # progress from which an action has been performed
+
+
+def still_mask(X: np.ndarray, frames: int, band: np.ndarray) -> np.ndarray:
+    """(N,) bool: frame i of ``X (N, D)`` ends ``frames`` frames each of whose channels stays
+    within ``band (D,)`` (the first ``frames - 1`` frames are never still; NaN is not)."""
+    N = X.shape[0]
+    out = np.zeros(N, dtype=bool)
+    if frames < 1 or N < frames:
+        return out
+    windows = sliding_window_view(X, frames, axis=0)       # (N - frames + 1, D, frames)
+    with np.errstate(invalid="ignore"):
+        spans = windows.max(axis=2) - windows.min(axis=2)
+        out[frames - 1:] = np.all(spans <= band, axis=1)    # NaN compares False
+    return out
+
+
+def build_still(templates: list[np.ndarray], takes: list[list[np.ndarray]], frames: int,
+                band: float, end: float) -> StillModel:
+    """The still stage of a bank of ``templates`` (K (T_k, D)) demonstrated by ``takes``
+    (per action its (T_i, D) takes); ``frames``: window [frames] (0: off); ``band``: x each
+    channel's spread over every take; ``end``: the bank's end fraction."""
+    every = np.concatenate([t for action in takes for t in action], axis=0)
+    widths = band * every.std(axis=0)
+    still_action = np.array([
+        np.mean(np.concatenate([still_mask(t, frames, widths) for t in action]))
+        > STILL_ACTION_SHARE for action in takes]) if frames > 0 else np.zeros(len(takes), bool)
+    masks, lead = [], []
+    for template in templates:
+        mask = still_mask(template, frames, widths)
+        masks.append(mask)
+        leading = mask.copy()
+        leading[:max(frames - 1, 0)] = True
+        first_moving = int(np.argmin(leading)) if not leading.all() else len(leading)
+        lead.append(first_moving / (len(template) - 1))
+    return StillModel(int(frames), widths, still_action, np.array(lead), masks, float(end))
+
+
+def holds_no_action(model: StillModel, action: int, progress: float) -> bool:
+    """Whether still input at ``progress`` of ``action`` (>= 0) is shown as no action."""
+    if model.still_action[action]:
+        return False
+    if progress >= model.end or progress <= model.lead[action] + LEAD_MARGIN:
+        return True
+    mask = model.template_still[action]
+    return not mask[int(round(progress * (len(mask) - 1)))]
+
+
+class StillWindow:
+    """The last ``frames`` frames of a performance, for :func:`still_mask` one frame at a time
+    (nothing allocated per frame)."""
+
+    def __init__(self, model: StillModel, channels: int):
+        self.model = model
+        self._frames = np.full((max(model.frames, 1), channels), np.nan)
+        self._span = np.empty(channels)
+        self._low = np.empty(channels)
+        self._seen = 0
+
+    def reset(self) -> None:
+        self._frames.fill(np.nan)
+        self._seen = 0
+
+    def load(self, X: np.ndarray) -> None:
+        """Start over from the last frames of ``X (N, D)``, as if pushed one by one."""
+        self.reset()
+        for x in X[-self._frames.shape[0]:]:
+            self.push(x)
+
+    def push(self, x: np.ndarray) -> bool:
+        """Add frame ``x (D,)``; True when the input is still at it."""
+        if self.model.frames < 1:
+            return False
+        self._frames[self._seen % self.model.frames] = x
+        self._seen += 1
+        if self._seen < self.model.frames:
+            return False
+        np.max(self._frames, axis=0, out=self._span)
+        np.min(self._frames, axis=0, out=self._low)
+        np.subtract(self._span, self._low, out=self._span)
+        with np.errstate(invalid="ignore"):
+            return bool(np.all(self._span <= self.model.band))

@@ -1,0 +1,90 @@
+"""Still input is no action: the still stage of a bank (synthetic actions whose still
+stretches are known)."""
+import numpy as np
+import pytest
+
+from followers import BankConfig, FollowerBank
+from followers.still import still_mask
+
+NOISE = 0.01
+
+
+def gesture(T=100, phase=0.0):
+    """A two-channel gesture that moves throughout."""
+    t = np.linspace(0.0, 1.0, T)
+    return np.stack([np.sin(2 * np.pi * t + phase) + 2 * t,
+                     np.cos(3 * np.pi * t + phase) * (1 - t)], axis=1)
+
+
+def noisy(values, rng):
+    return values + rng.normal(scale=NOISE, size=values.shape)
+
+
+@pytest.fixture
+def actions(rng):
+    paused = gesture(100, 1.0)
+    paused = np.vstack([paused[:50], np.repeat(paused[49:50], 30, axis=0), paused[50:]])
+    return {"wave": noisy(gesture(), rng), "turn": noisy(paused, rng),
+            "rest": noisy(np.full((80, 2), [0.5, -0.5]), rng)}
+
+
+def test_still_mask_is_the_range_over_the_window(rng):
+    X = rng.normal(size=(60, 3))
+    X[20:40] = X[20] + rng.uniform(-0.05, 0.05, size=(20, 3))
+    X[30, 1] = np.nan
+    band = np.array([0.1, 0.1, 0.2])
+    frames = 5
+    reference = np.zeros(60, dtype=bool)
+    for i in range(frames - 1, 60):
+        window = X[i - frames + 1:i + 1]
+        reference[i] = (not np.isnan(window).any()) and bool(np.all(
+            window.max(axis=0) - window.min(axis=0) <= band))
+    np.testing.assert_array_equal(still_mask(X, frames, band), reference)
+    assert reference[24] and not reference[34]  # still, and a missing value is not
+    assert not still_mask(X, 0, band).any()
+
+
+def test_holding_still_after_a_gesture_is_no_action_soon(actions, rng):
+    """A wave, then the performer holds still where it ended: without the stage the bank goes
+    on showing the wave; with it the wave is shown to its end and "no action" from at most
+    ``still_frames`` frames into the hold."""
+    hold = noisy(np.repeat(actions["wave"][-1:], 60, axis=0), rng)
+    performance = np.vstack([noisy(actions["wave"], rng), hold])
+    plain = FollowerBank(actions).follow(performance)["action"]
+    assert np.all(plain[-30:] == 0)
+    frames = 10
+    bank = FollowerBank(actions, config=BankConfig(still_frames=frames))
+    shown = bank.follow(performance)["action"]
+    assert np.mean(shown[60:100] == 0) > 0.9          # the wave itself is shown
+    assert np.all(shown[100 + frames:] == -1)          # the hold is no action
+
+
+def test_a_still_action_and_a_pause_inside_a_gesture_stay(actions, rng):
+    """Holding the rest pose is the "rest" action; the pause the "turn" action makes halfway
+    (in its template too) is part of it and keeps being shown."""
+    bank = FollowerBank(actions, config=BankConfig(still_frames=10))
+    rest = bank.follow(noisy(actions["rest"], rng))["action"]
+    assert np.all(rest[20:] == 2)
+    turn = bank.follow(noisy(actions["turn"], rng))["action"]
+    assert np.all(turn[60:130] == 1), turn[60:130]
+
+
+def test_step_says_what_follow_says(actions, rng):
+    performance = np.vstack([noisy(actions["wave"], rng),
+                             noisy(np.repeat(actions["wave"][-1:], 40, axis=0), rng),
+                             noisy(actions["turn"], rng)])
+    bank = FollowerBank(actions, config=BankConfig(still_frames=8))
+    traced = bank.follow(performance)["action"]
+    assert (traced == -1).any()
+    bank.reset()
+    stepped = np.array([bank.step(x).index for x in performance])
+    np.testing.assert_array_equal(stepped, traced)
+    names = [bank.step(x).action for x in performance[:5]]
+    assert all(n is None or n in bank.actions for n in names)
+
+
+def test_still_settings_are_checked():
+    with pytest.raises(ValueError, match="still_frames must be >= 0"):
+        BankConfig(still_frames=-1)
+    with pytest.raises(TypeError, match="still_frames must be an int"):
+        BankConfig(still_frames=2.5)

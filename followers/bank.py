@@ -25,6 +25,7 @@ from followers.defaults import as_sigma, as_window, default_window
 from followers.demos import Demonstrations, combine
 from followers.follower import Follower, adaptation, chain, resolve_config
 from followers.model import build_forward, check_frame, forward_state, reset_forward
+from followers.intervals import interval_state, reset_interval, stacked, widen
 from followers.still import StillWindow, build_still, holds_no_action, still_mask
 
 
@@ -234,6 +235,12 @@ class FollowerBank:
         self._still = build_still(arrays, [list(a.takes) for a in actions], config.still_frames,
                                   config.still_band, config.end_fraction)
         self._still_window = StillWindow(self._still, arrays[0].shape[1])
+        # the shown variance widened by the residual's autocorrelation (followers.intervals)
+        self._intervals = stacked(arrays, sigmas)
+        self._interval_state = interval_state(arrays[0].shape[1])
+        self._frame = np.zeros((1, arrays[0].shape[1]))
+        self._shown, self._shown_progress, self._shown_variance = (
+            np.zeros(1, dtype=np.int64), np.zeros(1), np.zeros(1))
         self._state = forward_state(self._forward)
         self._bank = bank_state(self._model)
         self._out = BankOutput(self)
@@ -350,6 +357,7 @@ class FollowerBank:
         self._state.mixture[0] = self._model.mixture_start
         _bank_kernels.gate(self._state, self._model, self._bank, -1)
         self._still_window.reset()
+        reset_interval(self._interval_state)
         self._publish()
 
     def step(self, x) -> BankOutput:
@@ -358,10 +366,25 @@ class FollowerBank:
         Returns the bank's :class:`BankOutput`, **the same object every call** (fields updated
         in place; ``.copy()`` keeps a snapshot). No array is allocated when ``x`` is already a
         float64 array."""
-        frame = check_frame(x, self.channels)
-        _bank_kernels.bank_step(self._forward.model, self._state, self._model, self._bank, frame)
-        self._publish(self._still_window.push(frame))
+        frame = self._frame
+        frame[0] = check_frame(x, self.channels)
+        _bank_kernels.bank_step(self._forward.model, self._state, self._model, self._bank,
+                                frame[0])
+        self._publish(self._still_window.push(frame[0]))
+        decision = self._bank.decision
+        self._shown[0] = decision[0] if decision[0] >= 0 else decision[1]
+        self._shown_progress[0] = self._out.progress
+        self._shown_variance[0] = self._out.variance
+        self._widen(frame, self._shown, self._shown_progress, self._shown_variance)
+        self._out.variance = float(self._shown_variance[0])
         return self._out
+
+    def _widen(self, X, shown, progress, variance) -> None:
+        """``variance`` of the ``shown`` actions widened in place (``followers.intervals``)."""
+        c = self.config.follower
+        if c.residual_cap > 1.0:
+            widen(*self._intervals, shown, X, progress, variance, c.residual_memory,
+                  c.residual_cap, self._interval_state)
 
     def _publish(self, still: bool = False) -> None:
         out, decision = self._out, self._bank.decision
@@ -389,8 +412,11 @@ class FollowerBank:
             raise ValueError(f"X must be (N, {self.channels}), got shape {arr.shape}")
         trace = BankTrace.empty(arr.shape[0], len(self._names))
         self.reset()
-        _bank_kernels.bank_run(self._forward.model, self._state, self._model, self._bank,
-                               np.ascontiguousarray(arr), trace)
+        arr = np.ascontiguousarray(arr)
+        _bank_kernels.bank_run(self._forward.model, self._state, self._model, self._bank, arr,
+                               trace)
+        shown = np.where(trace.action >= 0, trace.action, np.argmax(trace.posteriors, axis=1))
+        self._widen(arr, shown, trace.progress, trace.variance)
         still = still_mask(arr, self._still.frames, self._still.band)
         for i in np.flatnonzero(still):
             if trace.action[i] >= 0 and holds_no_action(self._still, int(trace.action[i]),
@@ -398,6 +424,8 @@ class FollowerBank:
                 trace.action[i] = -1
         self._still_window.load(arr)
         self._publish(bool(still[-1]) if still.size else False)
+        if arr.shape[0]:
+            self._out.variance = float(trace.variance[-1])
         return trace._asdict()
 
     def __repr__(self) -> str:

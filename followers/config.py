@@ -146,6 +146,11 @@ class FollowerConfig(_Config):
     tempo_exponent: float = _f(0.2, "power", "variance x tempo ** this", low=0.0)
     tempo_memory: float = _f(10.0, "frames", "time constant of the tempo estimate", low=0.0,
                              low_open=True)
+    residual_memory: float = _f(20.0, "frames", "time constant of the residual's "
+                                "autocorrelation, which widens the reported variance "
+                                "(followers.intervals)", low=0.0, low_open=True)
+    residual_cap: float = _f(20.0, "x variance", "the reported variance is widened at most "
+                             "this much (1: not at all)", low=1.0)
     spread_weight: float = _f(0.3, "x spread squared", "with several demonstrations, their "
                               "spread around the averaged template enters each state's "
                               "emission variance with this weight", low=0.0)

@@ -10,6 +10,7 @@ from followers import _kernels
 from followers.config import FollowerConfig
 from followers.defaults import as_sigma, as_template, as_window, default_sigma, default_window
 from followers.demos import combine, is_takes
+from followers.intervals import interval_state, reset_interval, stacked, widen
 from followers.model import build_forward, check_frame, forward_state, reset_forward
 from followers.transitions import TransitionModel, transition_model
 
@@ -20,7 +21,8 @@ class FollowerOutput:
 
     progress : float in [0, 1]: expected template position / (T - 1)
     variance : float >= 0: variance of that position [progress units squared] (times the
-        performer's tempo to the power ``tempo_exponent`` with ``tempo_variance``)
+        performer's tempo to the power ``tempo_exponent`` with ``tempo_variance``, widened
+        when the residual is correlated from frame to frame: ``followers.intervals``)
     log_likelihood : float: log-likelihood of everything seen since reset (natural log of a
         density in the input's units; comparable across templates with the same channels)
     frame_log_likelihood : float: the last frame's share of ``log_likelihood``
@@ -148,8 +150,13 @@ class Follower:
                                 float(model.speeds.max()), config.tempo_exponent]
                                ) if config.tempo_variance else None
         self._tempo_state = np.array([0.0, 1.0])
-        # one frame's progress and variance for the kernel, reused
+        # one frame's progress and variance for the kernels, reused
         self._frame_progress, self._frame_variance = np.zeros(1), np.zeros(1)
+        # the variance widened by the residual's autocorrelation (followers.intervals)
+        self._intervals = stacked([tmpl], [self._sigma])
+        self._interval_state = interval_state(D)
+        self._frame = np.zeros((1, D))
+        self._on = np.zeros(1, dtype=np.int64)
 
     # ---- parameters ---------------------------------------------------------------------------
     @property
@@ -201,18 +208,21 @@ class Follower:
         """Forget everything seen: the next frame is the first of a performance."""
         reset_forward(self._forward, self._state)
         self._tempo_state[:] = (0.0, 1.0)
+        reset_interval(self._interval_state)
 
     def step(self, x) -> FollowerOutput:
         """Follow one frame ``x (D,) float`` (NaN = missing channel; all NaN = no observation)."""
         model, state = self._forward.model, self._state
-        _kernels.forward_step(model, state, check_frame(x, self.channels))
+        self._frame[0] = check_frame(x, self.channels)
+        _kernels.forward_step(model, state, self._frame[0])
         progress, variance = _kernels.main_progress(model.lengths, state.moments, state.main, 0)
+        self._frame_progress[0] = progress
+        self._frame_variance[0] = variance
         if self._tempo is not None:
-            self._frame_progress[0] = progress
-            self._frame_variance[0] = variance
             _kernels.tempo_calibrate(self._frame_progress, self._frame_variance,
                                      self.length - 1.0, self._tempo, self._tempo_state)
-            variance = float(self._frame_variance[0])
+        self._widen(self._frame, self._on, self._frame_progress, self._frame_variance)
+        variance = float(self._frame_variance[0])
         return FollowerOutput(float(progress), float(variance), float(state.loglik[0]),
                               float(state.frame_loglik[0, 0]))
 
@@ -229,13 +239,21 @@ class Follower:
             self.reset()
         N = arr.shape[0]
         progress, variance, loglik = np.empty((N, 1)), np.empty((N, 1)), np.empty((N, 1))
-        _kernels.forward_run(self._forward.model, self._state, np.ascontiguousarray(arr),
-                             progress, variance, loglik)
+        arr = np.ascontiguousarray(arr)
+        _kernels.forward_run(self._forward.model, self._state, arr, progress, variance, loglik)
         progress, variance = progress[:, 0], variance[:, 0]
         if self._tempo is not None:
             _kernels.tempo_calibrate(progress, variance, self.length - 1.0, self._tempo,
                                      self._tempo_state)
+        self._widen(arr, np.zeros(N, dtype=np.int64), progress, variance)
         return FollowerTrace(progress, variance, loglik[:, 0])
+
+    def _widen(self, X, which, progress, variance) -> None:
+        """``variance`` widened in place by the residual's autocorrelation."""
+        c = self.config
+        if c.residual_cap > 1.0:
+            widen(*self._intervals, which, X, progress, variance, c.residual_memory,
+                  c.residual_cap, self._interval_state)
 
     def __repr__(self) -> str:
         return (f"Follower(T={self.length}, D={self.channels}, window={self._window}, "

@@ -39,7 +39,7 @@ LAYERS = {
         ["followers._jit", "followers._cells", "followers._kernels", "followers._bank_kernels",
          "followers.config", "followers.defaults", "followers.preprocessing",
          "followers.transitions", "followers.datasets", "followers.model",
-         "followers.still"],
+         "followers.still", "followers.intervals"],
         ["followers.bank_model"],
         ["followers.follower"],
         ["followers.bank", "followers.training"],

@@ -166,3 +166,21 @@ def test_action_names_after_and_sources_beside_the_session_file(tmp_path):
     for spec in ("camera:0:aruco", "hid:p5", "hid:generic@/dev/hidraw3", "osc:127.0.0.1:9/x"):
         other = GOOD.replace('source = "osc:127.0.0.1:9000/hand"', f'source = "{spec}"')
         assert load_session(write(tmp_path, other)).performers[1].source == spec
+
+
+def test_an_action_of_several_takes(tmp_path):
+    """`takes = [...]`: the follower learns from them all; the motion plays from `take`, the
+    first of them unless given; a bad list names the key."""
+    text = GOOD.replace('take = "open"', 'takes = ["open", "open_2", "open_3"]')
+    config = load_session(write(tmp_path, text))
+    first = config.actions[0]
+    assert first.take == "open" and first.action == "open"
+    assert first.demonstrations == ("open", "open_2", "open_3")
+    assert config.actions[1].demonstrations == ("wave",)
+    given = GOOD.replace('take = "open"', 'take = "open_2"\ntakes = ["open", "open_2"]')
+    assert load_session(write(tmp_path, given)).actions[0].take == "open_2"
+    for bad in ('[]', '["open", "open"]', '"open"', '["open", 3]'):
+        with pytest.raises(SessionError, match=r"actions\[0\]\.takes.*a list of take names"):
+            load_session(write(tmp_path, GOOD.replace('take = "open"', f"takes = {bad}")))
+    with pytest.raises(SessionError, match=r"actions\[0\]\.take"):
+        load_session(write(tmp_path, GOOD.replace('take = "open"', 'name = "open"')))

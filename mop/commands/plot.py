@@ -41,7 +41,8 @@ def bank_for(args):
         config = load_session(args.session)
         store = open_store(config.takes)
         target = take_data(store, args.take)
-        takes = {a.take: take_data(store, a.take) for a in config.actions}
+        takes = {t: take_data(store, t) for a in config.actions
+                 for t in (a.take, *a.takes)}
         candidates = [p for p in config.performers
                       if args.performer in (None, p.name)]
         if args.performer and not candidates:

@@ -20,15 +20,6 @@ def register(subparsers) -> None:
     parser.set_defaults(func=run)
 
 
-def bank_options(performer) -> dict:
-    options = {}
-    if performer.sigma is not None:
-        options["sigma"] = performer.sigma
-    if performer.window is not None:
-        options["window"] = performer.window
-    return options
-
-
 def run(args) -> int:
     import numpy as np
 
@@ -49,26 +40,29 @@ def run(args) -> int:
         print(f"character {character.name}: " + ("; ".join(
             f"{track.performer} drives {', '.join(sorted(track.targets))}"
             for track in character.tracks) or "driven by no action"))
-    results = []
+    results, several = [], []
     for performer in config.performers:
         templates, channels, _, _ = performer_templates(config, performer, takes,
                                                         where=str(config.path))
         start = time.perf_counter()
-        build_bank(templates, performer)
+        bank = build_bank(templates, performer)
         seconds = time.perf_counter() - start
         print(f"performer {performer.name}: {count(len(templates), 'action')} on "
               f"{count(len(channels), 'channel')} ({', '.join(channels)}), "
               f"{performer.normalise.value} normalisation, bank built in {1e3 * seconds:.1f} ms")
-        for name, template in templates.items():
+        for name in templates:
             drives = [a.character for a in config.actions_of(performer.name)
                       if a.action == name]
-            seconds = (template.shape[0] - 1) / config.fps
-            print(f"  {name:<16} {template.shape[0]:>4} frames ({seconds:.2f} s at {config.fps} "
+            frames = bank.template(name).shape[0]
+            seconds = (frames - 1) / config.fps
+            print(f"  {name:<16} {frames:>4} frames ({seconds:.2f} s at {config.fps} "
                   f"fps) -> {', '.join(drives)}")
+            say_consistency(bank, name, config.actions_of(performer.name))
         from followers import confusability
-        result = confusability(templates, **bank_options(performer))
+        result = confusability(bank)
         names, matrix = list(result.names), result.matrix
         results.append((performer.name, result))
+        several.append((performer.name, bank))
         width = max(len(n) for n in names) + 2
         print("  confusability (row: demonstration performed, column: follower accepting it):")
         print("  " + " " * width + "".join(f"{n:>{width}}" for n in names))
@@ -84,7 +78,60 @@ def run(args) -> int:
     target = Path(args.plot) if args.plot else Path(f"{Path(args.session).stem}-confusability.png")
     plot_matrices(results, target)
     print(f"wrote {target}")
+    consistency = target.with_name(target.stem.replace("-confusability", "")
+                                   + "-consistency.png")
+    if plot_consistency(several, consistency):
+        print(f"wrote {consistency}")
     return 0
+
+
+def takes_of(name, bindings) -> tuple[str, ...]:
+    """The take names of action ``name`` among a performer's bindings."""
+    return next(b.demonstrations for b in bindings if b.action == name)
+
+
+def say_consistency(bank, name, bindings) -> None:
+    """One line per action of several takes: each take's distance from their average (in
+    the action's channel spreads), and the outlier if one take strays."""
+    demos = bank.demonstrations(name)
+    if demos.count < 2:
+        return
+    names = takes_of(name, bindings)
+    distances = ", ".join(f"{t} {d:.2f}" for t, d in zip(names, demos.distances))
+    odd = demos.outlier()
+    verdict = (f"; {names[odd]} strays from the others (record it again or leave it out)"
+               if odd is not None else "; consistent")
+    print(f"    {demos.count} takes, distance from their average: {distances}{verdict}")
+
+
+def plot_consistency(banks, path: Path) -> bool:
+    """Per performer, per action of several takes, each take's distance from their average
+    (the outlier in red), into a PNG; False (nothing drawn) when no action has several."""
+    rows = [(performer, name, bank.demonstrations(name)) for performer, bank in banks
+            for name in bank.actions if bank.demonstrations(name).count > 1]
+    if not rows:
+        return False
+    import numpy as np
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    figure, axes = plt.subplots(len(rows), 1, figsize=(6.4, 1.2 + 1.3 * len(rows)),
+                                squeeze=False)
+    for axis, (performer, name, demos) in zip(axes[:, 0], rows):
+        odd = demos.outlier()
+        colours = ["tab:red" if i == odd else "tab:blue" for i in range(demos.count)]
+        axis.barh(np.arange(demos.count), demos.distances, color=colours)
+        axis.set_yticks(np.arange(demos.count), [f"take {i + 1}" for i in range(demos.count)])
+        axis.invert_yaxis()
+        axis.set_title(f"{performer}: {name}" + (f" (take {odd + 1} strays)"
+                                                 if odd is not None else ""), fontsize=10)
+    axes[-1, 0].set_xlabel("distance from the takes' average [channel spreads]")
+    figure.suptitle("How consistent each action's takes are")
+    figure.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    figure.savefig(path, dpi=100)
+    plt.close(figure)
+    return True
 
 
 def plot_matrices(results, path: Path) -> None:

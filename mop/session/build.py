@@ -111,7 +111,8 @@ def normalisation(templates: list[np.ndarray], how: Normalise) -> tuple[np.ndarr
 
 def performer_templates(config: SessionConfig, performer: PerformerConfig,
                         takes: Mapping[str, TakeData], *, where: str):
-    """{action name: (T, D) normalised template}, channel names, shift, scale for one performer.
+    """{action name: (T, D) normalised template, or a list of them for an action of several
+    takes}, channel names, shift, scale for one performer.
 
     Each template is its take's action, aligned to the motion and sampled at the session rate:
     the bank then steps once per session frame."""
@@ -119,25 +120,29 @@ def performer_templates(config: SessionConfig, performer: PerformerConfig,
     if not actions:
         raise SessionError(f"{where}: performers.{performer.name}: no [[actions]] name this "
                            f"performer; expected at least one")
-    raw: dict[str, np.ndarray] = {}
+    raw: dict[str, list[np.ndarray]] = {}
     channels = performer.channels
     for action in actions:
         if action.action in raw:
             continue
-        data = takes[action.take]
-        wanted = channels or data.channels
-        missing = [c for c in wanted if c not in data.channels]
-        if missing:
-            key = "channels" if performer.channels else "source"
-            raise SessionError(
-                f"{where}: performers.{performer.name}.{key}: take {action.take!r} has no "
-                f"channel {missing[0]!r}; it has {', '.join(data.channels)}")
-        if not channels:
-            channels = data.channels
-        index = [data.channels.index(c) for c in channels]
-        raw[action.action] = data.template(config.fps)[:, index]
-    shift, scale = normalisation(list(raw.values()), performer.normalise)
-    templates = {name: (values - shift) / scale for name, values in raw.items()}
+        raw[action.action] = []
+        for name in action.demonstrations:
+            data = takes[name]
+            wanted = channels or data.channels
+            missing = [c for c in wanted if c not in data.channels]
+            if missing:
+                key = "channels" if performer.channels else "source"
+                raise SessionError(
+                    f"{where}: performers.{performer.name}.{key}: take {name!r} has no "
+                    f"channel {missing[0]!r}; it has {', '.join(data.channels)}")
+            if not channels:
+                channels = data.channels
+            index = [data.channels.index(c) for c in channels]
+            raw[action.action].append(data.template(config.fps)[:, index])
+    shift, scale = normalisation([v for values in raw.values() for v in values],
+                                 performer.normalise)
+    templates = {name: [(v - shift) / scale for v in values] if len(values) > 1
+                 else (values[0] - shift) / scale for name, values in raw.items()}
     return templates, tuple(channels), shift, scale
 
 
@@ -175,9 +180,10 @@ def session_takes(config: SessionConfig, store) -> dict[str, TakeData]:
     where = str(config.path) if config.path else "<session>"
     takes: dict[str, TakeData] = {}
     for index, action in enumerate(config.actions):
-        if action.take not in takes:
-            takes[action.take] = take_data(store, action.take,
-                                           where=f"{where}: actions[{index}].take: ")
+        for name in (action.take, *action.takes):
+            if name not in takes:
+                key = "take" if name == action.take else "takes"
+                takes[name] = take_data(store, name, where=f"{where}: actions[{index}].{key}: ")
     return takes
 
 

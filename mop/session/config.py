@@ -24,6 +24,7 @@ Example::
 
     [[actions]]
     take = "frog_open"                       # a take in the store: its action trains the follower
+    # takes = ["frog_open", "frog_open_2"]   # or several takes of it: the follower learns all
     performer = "left"                       # whose action it is
     character = "frog"                       # whose motion it drives
 """
@@ -114,17 +115,24 @@ class ActionBinding:
     `name` is the action's name (shown in the preview, sent over OSC; default the take's name);
     `channels` maps motion channel -> the character's target name (empty = every channel of the
     take's motion under its own name); `after` says what the character does when the action
-    ends."""
+    ends; `takes` are several takes of the action (its follower learns from them all, and
+    `take`, the one whose motion plays, is the first of them unless given)."""
     take: str
     performer: str
     character: str
     channels: tuple[tuple[str, str], ...] = ()
     name: str = ""
     after: After = After.REST
+    takes: tuple[str, ...] = ()
 
     @property
     def action(self) -> str:
         return self.name or self.take
+
+    @property
+    def demonstrations(self) -> tuple[str, ...]:
+        """The takes the action's follower learns from (`takes`, or `take` alone)."""
+        return self.takes or (self.take,)
 
 
 @dataclass(frozen=True)
@@ -404,8 +412,15 @@ def parse_session(user: Mapping[str, Any], *, where: str = "<session>",
             raise top.fail(f"actions[{index}]", "a table", raw)
         entry = _Reader(where, _merge(defaults["action_defaults"], raw), f"actions[{index}]")
         entry.check_keys(set(defaults["action_defaults"])
-                         | {"take", "performer", "character", "name"})
-        take = entry.string("take", required=True)
+                         | {"take", "takes", "performer", "character", "name"})
+        several = entry.raw("takes")
+        if several is not None and (
+                not isinstance(several, list) or not several
+                or not all(isinstance(v, str) and v for v in several)
+                or len(set(several)) != len(several)):
+            raise entry.fail("takes", "a list of take names without repeats", several)
+        several = tuple(several or ())
+        take = entry.string("take", required=not several) or several[0]
         action_name = entry.string("name") or ""
         performer_name = entry.string("performer", required=True)
         if performer_name not in performer_names:
@@ -426,7 +441,8 @@ def parse_session(user: Mapping[str, Any], *, where: str = "<session>",
             channels = tuple((name, name) for name in entry.names("channels"))
         actions.append(ActionBinding(take=take, performer=performer_name,
                                      character=character_name, channels=channels,
-                                     name=action_name, after=entry.choice("after", After)))
+                                     name=action_name, after=entry.choice("after", After),
+                                     takes=several))
     _check_bindings(where, actions)
 
     outputs = _Reader(where, _merge(defaults["outputs"], top.sub("outputs").table), "outputs")

@@ -2,6 +2,7 @@
 killed with SIGKILL, and the `mop takes`, `mop record` and `mop devices` commands."""
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -311,6 +312,16 @@ def test_record_command_with_a_replayed_performer(tmp_path, capsys):
     templates = performer_templates(TakeStore(folder), "bo", rate=25.0)
     assert sorted(templates) == ["bo-nod-001", "bo-wave-001"]
     assert templates["bo-wave-001"].shape == (16, 2)
+    # the same action again is a numbered take of it: one action of two takes, their
+    # consistency reported, compared with the other action as one
+    arguments[arguments.index("nod")] = "wave"
+    assert main(arguments) == 0
+    out = capsys.readouterr().out
+    assert "stored take bo-wave-002" in out
+    assert re.search(r"2 takes of this action; distance of each from their average "
+                     r"\(channel spreads\): bo-wave-001 [\d.]+, bo-wave-002 \(new\) [\d.]+", out)
+    assert "confusability of wave with the performer's other actions" in out
+    assert re.search(r"^  nod +accepts the new action", out, re.M)
 
 
 def test_record_command_errors(tmp_path, capsys):

@@ -129,32 +129,63 @@ def write_motion_preview(motion, path, *, fps: float = PREVIEW_FPS,
 
 # -- confusability ------------------------------------------------------------------------------
 
-def confusability_report(templates: dict, new_name: str) -> list[str]:
-    """Lines saying how confusable take `new_name` is with the others, from
-    followers.confusability(templates: {name: (T, D) array}) (imported here, lazily: mop is the
-    only package that may call into followers). Channels are z-scored over all the templates
-    first, as a session would, so that no channel dominates by its units."""
+def _zscored(arrays):
+    """A function z-scoring by every channel's mean and spread over ``arrays``, as a session
+    would, so that no channel dominates by its units."""
     import numpy as np
-
-    if len(templates) < 2:
-        return ["confusability: this is the performer's first take on these channels; nothing "
-                "to compare yet"]
-    from followers import confusability
-    stacked = np.concatenate(list(templates.values()), axis=0)
+    stacked = np.concatenate(arrays, axis=0)
     shift = np.nanmean(stacked, axis=0)
     scale = np.nanstd(stacked, axis=0)
     scale = np.where(np.isfinite(scale) & (scale > 1e-12), scale, 1.0)
     shift = np.where(np.isfinite(shift), shift, 0.0)
-    result = confusability({name: (values - shift) / scale
-                            for name, values in templates.items()})
+    return lambda values: (values - shift) / scale
+
+
+def consistency_report(takes: list, new_name: str) -> list[str]:
+    """Lines saying how consistent the takes of the new take's action are, ``takes`` its
+    (take name, (T, D) array) pairs (followers.combine); none for a first take."""
+    if len(takes) < 2:
+        return []
+    from followers import combine
+    scaled = _zscored([values for _, values in takes])
+    demos = combine([scaled(values) for _, values in takes])
+    names = [take_name for take_name, _ in takes]
+    lines = [f"{len(takes)} takes of this action; distance of each from their average "
+             f"(channel spreads): " + ", ".join(
+                 f"{n}{' (new)' if n == new_name else ''} {d:.2f}"
+                 for n, d in zip(names, demos.distances))]
+    odd = demos.outlier()
+    if odd is not None:
+        lines.append(f"  {names[odd]} strays from the others: record it again, or leave it out "
+                     f"of the session's takes = [...]")
+    return lines
+
+
+def confusability_report(templates: dict, new_name: str) -> list[str]:
+    """Lines saying how confusable action `new_name` is with the others, from
+    followers.confusability over a bank of ``templates`` ({name: (T, D) array, or a list of
+    them for an action of several takes}) (imported here, lazily: mop is the only package
+    that may call into followers). Channels are z-scored over all the takes first."""
+    if len(templates) < 2:
+        return ["confusability: this is the performer's first action on these channels; "
+                "nothing to compare yet"]
+    import numpy as np
+
+    from followers import FollowerBank, confusability
+    arrays = [v for values in templates.values()
+              for v in (values if isinstance(values, list) else [values])]
+    scaled = _zscored(arrays)
+    result = confusability(FollowerBank({
+        name: [scaled(v) for v in values] if isinstance(values, list) else scaled(values)
+        for name, values in templates.items()}))
     names = list(getattr(result, "names", templates))
     matrix = np.asarray(getattr(result, "matrix", result), dtype=float)
     if matrix.shape != (len(names), len(names)) or new_name not in names:
         return [f"confusability: unexpected result {type(result).__name__} "
                 f"{getattr(matrix, 'shape', '')}"]
     k = names.index(new_name)
-    lines = [f"confusability of {new_name} with the performer's other takes (share of frames "
-             f"a follower accepts a demonstration, 0..1):",
+    lines = [f"confusability of {new_name} with the performer's other actions (share of "
+             f"frames a follower accepts a demonstration, 0..1):",
              f"  its own follower accepts it on {matrix[k, k]:.0%} of frames"]
     decisions = getattr(result, "decisions", None)
     if decisions is not None and np.shape(decisions) == (len(names), len(names) + 1):
@@ -382,6 +413,16 @@ def _record(args) -> int:
     templates = performer_templates(store, args.performer, rate=args.rate,
                                     channels=take.channels)
     templates[name] = take.aligned(args.rate)[1]
-    for line in confusability_report(templates, name):
+    # numbered takes of one action are one action with several takes
+    action_of = {info.name: info.action for info in store.list(performer=args.performer)}
+    action_of[name] = args.action
+    actions: dict = {}
+    for take_name, values in templates.items():
+        actions.setdefault(action_of.get(take_name, take_name), []).append((take_name, values))
+    for line in consistency_report(actions[args.action], name):
+        print(line)
+    grouped = {action: [v for _, v in pairs] if len(pairs) > 1 else pairs[0][1]
+               for action, pairs in actions.items()}
+    for line in confusability_report(grouped, args.action):
         print(line)
     return 0

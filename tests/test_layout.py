@@ -41,7 +41,7 @@ LAYERS = {
          "followers.transitions", "followers.datasets", "followers.model",
          "followers.still", "followers.intervals"],
         ["followers.bank_model"],
-        ["followers.follower"],
+        ["followers.follower", "followers.demos"],
         ["followers.bank", "followers.training"],
         ["followers.confusion"],
     ],

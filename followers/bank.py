@@ -384,7 +384,7 @@ class FollowerBank:
         c = self.config.follower
         if c.residual_cap > 1.0:
             widen(*self._intervals, shown, X, progress, variance, c.residual_memory,
-                  c.residual_cap, self._interval_state)
+                  c.residual_cap, min(c.outlier_sigmas, 1e300), self._interval_state)
 
     def _publish(self, still: bool = False) -> None:
         out, decision = self._out, self._bank.decision

@@ -10,7 +10,8 @@ the time for such a performer.
 
 The report is corrected, the recursion left alone: per frame the residual at the reported
 position, divided by the emission sigma there, is averaged over channels; an exponential
-window (``FollowerConfig.residual_memory`` frames) estimates its lag-one autocorrelation
+window (``FollowerConfig.residual_memory`` frames; each residual clipped at
+``outlier_sigmas``) estimates its lag-one autocorrelation
 ``rho``; the variance is multiplied by ``(1 + rho) / (1 - rho)`` (the variance of a mean of
 AR(1) samples against independent ones), at most ``residual_cap``. Independent residuals
 (``rho`` near 0, the demonstration replayed) leave the interval as it was.
@@ -42,14 +43,16 @@ def reset_interval(state: np.ndarray) -> None:
 
 
 @nb.njit(cache=True)
-def widen(templates, sigmas, offsets, which, X, progress, variance, memory, cap, state):
+def widen(templates, sigmas, offsets, which, X, progress, variance, memory, cap, clip, state):
     """Multiply ``variance (N,)`` in place by each frame's correlation factor.
 
     templates, sigmas : (sum T_k, D) the followers' templates and sigmas stacked;
     offsets, lengths implied: template ``k`` is rows ``offsets[k]:offsets[k + 1]``;
     which : (N,) int: the template each frame's ``progress`` is on (< 0: none, the frame is
-    left alone); X : (N, D) input (NaN: missing); memory [frames]; cap [x variance];
-    state : see ``interval_state``, carried across calls."""
+    left alone); X : (N, D) input (NaN, inf: missing); memory [frames]; cap [x variance];
+    clip [sigmas]: a residual counts at most this far (an absurd value, an outlier, would
+    hold the estimate for many frames); state : see ``interval_state``, carried across
+    calls."""
     decay = math.exp(-1.0 / memory)
     D = X.shape[1]
     for n in range(X.shape[0]):
@@ -66,13 +69,13 @@ def widen(templates, sigmas, offsets, which, X, progress, variance, memory, cap,
         seen = 0
         for d in range(D):
             x = X[n, d]
-            if math.isnan(x):
+            if not math.isfinite(x):
                 state[2 + d] = 0.0
                 continue
             a = start + low
             expected = (1.0 - w) * templates[a, d] + w * templates[a + 1, d]
             scale = (1.0 - w) * sigmas[a, d] + w * sigmas[a + 1, d]
-            r = (x - expected) / scale
+            r = min(max((x - expected) / scale, -clip), clip)
             lag1 += r * state[2 + d]
             lag0 += r * r
             state[2 + d] = r

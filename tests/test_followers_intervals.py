@@ -7,7 +7,7 @@ from followers import BankConfig, Follower, FollowerBank, FollowerConfig, time_w
 from followers.intervals import interval_state, stacked, widen
 
 
-def slow_widen(template, sigma, X, progress, variance, memory, cap):
+def slow_widen(template, sigma, X, progress, variance, memory, cap, clip):
     """The rule of ``followers.intervals`` written out plainly, one template."""
     out = variance.copy()
     decay = math.exp(-1.0 / memory)
@@ -20,8 +20,8 @@ def slow_widen(template, sigma, X, progress, variance, memory, cap):
         w = position - low
         expected = (1 - w) * template[low] + w * template[low + 1]
         scale = (1 - w) * sigma[low] + w * sigma[low + 1]
-        r = (X[n] - expected) / scale
-        seen = ~np.isnan(r)
+        r = np.clip((X[n] - expected) / scale, -clip, clip)
+        seen = np.isfinite(X[n])
         r = np.where(seen, r, 0.0)
         if seen.any():
             lag1 = decay * lag1 + (1 - decay) * float(np.sum(r * previous)) / seen.sum()
@@ -37,12 +37,14 @@ def test_widen_is_the_plain_rule(rng):
     sigma = rng.uniform(0.5, 2.0, size=(40, 3))
     X = template[np.linspace(0, 39, 70).astype(int)] + rng.normal(size=(70, 3)).cumsum(axis=0)
     X[10, 1] = np.nan
+    X[30, 2] = np.inf
+    X[40, 0] = 1e9
     progress = np.clip(np.linspace(0, 1, 70) + rng.normal(scale=0.02, size=70), 0, 1)
     variance = rng.uniform(1e-4, 1e-3, size=70)
-    expected = slow_widen(template, sigma, X, progress, variance, 20.0, 20.0)
+    expected = slow_widen(template, sigma, X, progress, variance, 20.0, 20.0, 5.0)
     got = variance.copy()
     widen(*stacked([template], [sigma]), np.zeros(70, dtype=np.int64), X, progress, got, 20.0,
-          20.0, interval_state(3))
+          20.0, 5.0, interval_state(3))
     np.testing.assert_allclose(got, expected, rtol=1e-12)
     assert (got > 2 * variance).mean() > 0.5  # a random-walk residual is correlated
 
@@ -53,7 +55,7 @@ def test_independent_residuals_leave_the_interval_alone(rng):
     X = template + rng.normal(scale=0.1, size=(200, 2))
     variance = np.full(200, 1e-4)
     widen(*stacked([template], [sigma]), np.zeros(200, dtype=np.int64), X,
-          np.linspace(0, 1, 200), variance, 20.0, 20.0, interval_state(2))
+          np.linspace(0, 1, 200), variance, 20.0, 20.0, 5.0, interval_state(2))
     assert np.median(variance[40:]) < 1.3e-4
 
 

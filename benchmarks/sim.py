@@ -279,83 +279,93 @@ def main(argv=None) -> int:
     rows = []
     curves = {}
     for label, spec, paper_nodes in meshes:
-        x, pairs, spacing = head_shell(**spec)
-        model = rubber_model(x, pairs, spacing)
-        pins = neck(model, spacing)
-        elastic, damped, fused = force_pass_rate(model)
-        print(f"== {label}: {model.node_count} masses, {model.spring_count} springs "
-              f"({model.spring_count / model.node_count:.2f}/mass), {pins.size} pinned; "
-              f"omega_max {max_frequency(model):.0f} rad/s")
-        print(f"   force pass: {elastic / 1e6:.0f} M springs/s elastic, {damped / 1e6:.0f} M "
-              f"springs/s with damping (plain fused loop: {fused / 1e6:.0f} M springs/s, "
-              f"split/fused {elastic / fused:.2f}x; target >= 250 M springs/s)")
-        rows.append((label, model.node_count, model.spring_count, "force pass", elastic, damped))
-        accuracy_here = (label.split(" / ")[0] in args.reference_meshes.split(",")
-                         and not args.no_reference)
-        for rate in (25, 60):
-            dt = 1.0 / rate
-            frames = max(10, int(round(args.seconds * rate)))
-            reference = None
-            if accuracy_here:
-                substeps = 4 * verlet_substeps(model, dt)
-                print(f"   reference at {rate} fps: Verlet, {substeps} substeps per frame ...",
-                      flush=True)
-                reference = reference_run(model, dt, frames, pins, substeps)
-            chosen_integrators = integrators(model, dt)
-            if args.default_only:
-                numpy_ms = math.nan
-                chosen_integrators = dict(list(chosen_integrators.items())[:1])
-            else:
-                numpy_ms = numpy_explicit_ms(model, dt, frames, pins)
-                print(f"   {rate} fps: plain NumPy explicit ({verlet_substeps(model, dt)} "
-                      f"substeps): {numpy_ms:.1f} ms/frame")
-            for name, integrator in chosen_integrators.items():
-                integrator.step(model, model.state(), dt)  # compile / factorise outside timing
-                record = [] if reference is not None else None
-                seconds, failures, retries, _ = run(model, integrator, dt, frames, pins,
-                                                    record=record,
-                                                    budget=None if record is not None else 30.0)
-                ms = seconds[1:] * 1e3  # the first step includes the factorisation
-                rms = (float(np.sqrt(np.mean(rms_per_frame(record, reference) ** 2)))
-                       if record is not None else math.nan)
-                if record is not None and label == "10k / 45k":  # the picture's mesh
-                    curves[(rate, name)] = rms_per_frame(record, reference)
-                print(f"   {rate} fps {name:37s} median {np.median(ms):7.2f} ms  p90 "
-                      f"{np.percentile(ms, 90):7.2f} ms  x{numpy_ms / np.median(ms):7.1f} vs "
-                      f"NumPy  RMS {rms * 1e3:6.3f} mm  failures {failures} retries {retries}"
-                      f"  ({len(seconds)} frames)",
-                      flush=True)
-                rows.append((label, model.node_count, model.spring_count, f"{rate} fps {name}",
-                             float(np.median(ms)), float(np.percentile(ms, 90)), rms,
-                             numpy_ms / np.median(ms), failures))
-                if name.startswith("projective (default"):
-                    print(f"   {rate} fps   of which {integrator.iterations_for(dt)} global "
-                          f"solves, {global_solve_ms(integrator, model):.2f} ms each (median, "
-                          f"timed after the run)", flush=True)
-        if paper_nodes:
-            print(f"   (the paper's row: {paper_nodes} masses; ours differs by "
-                  f"{model.node_count - paper_nodes:+d})")
-        print()
-
+        bench_mesh(label, spec, paper_nodes, args, rows, curves)
     if args.long_minutes > 0:
-        x, pairs, spacing = head_shell(cells=36, thickness=2.5)
-        model = rubber_model(x, pairs, spacing)
-        pins = neck(model, spacing)
-        frames = int(args.long_minutes * 60 * 60)
-        print(f"== stability: {args.long_minutes:g} simulated minutes at 60 fps on "
-              f"{model.node_count}/{model.spring_count} with the default integrator")
-        integrator = default_integrator()
-        seconds, failures, retries, state = run(model, integrator, 1 / 60, frames, pins,
-                                                progress=frames // 10)
-        drift = np.abs(state.x - model.rest_positions).max()
-        finite = bool(np.all(np.isfinite(state.x)))
-        print(f"   {frames} steps: failures {failures}, retries {retries}, finite {finite}, "
-              f"max displacement at the end {drift * 1e3:.1f} mm, median "
-              f"{np.median(seconds) * 1e3:.2f} ms, p90 {np.percentile(seconds, 90) * 1e3:.2f} ms")
+        stability_run(args.long_minutes)
 
     if curves and not args.no_picture:
         picture(curves, ROOT / "docs" / "img" / "sim_shaken_head.png")
     return 0
+
+
+def bench_mesh(label, spec, paper_nodes, args, rows, curves) -> None:
+    """Time one mesh: its force pass, then every integrator at 25 and 60 fps (RMS against the
+    converged reference where asked); appends to rows, and to curves for the picture's mesh."""
+    x, pairs, spacing = head_shell(**spec)
+    model = rubber_model(x, pairs, spacing)
+    pins = neck(model, spacing)
+    elastic, damped, fused = force_pass_rate(model)
+    print(f"== {label}: {model.node_count} masses, {model.spring_count} springs "
+          f"({model.spring_count / model.node_count:.2f}/mass), {pins.size} pinned; "
+          f"omega_max {max_frequency(model):.0f} rad/s")
+    print(f"   force pass: {elastic / 1e6:.0f} M springs/s elastic, {damped / 1e6:.0f} M "
+          f"springs/s with damping (plain fused loop: {fused / 1e6:.0f} M springs/s, "
+          f"split/fused {elastic / fused:.2f}x; target >= 250 M springs/s)")
+    rows.append((label, model.node_count, model.spring_count, "force pass", elastic, damped))
+    accuracy_here = (label.split(" / ")[0] in args.reference_meshes.split(",")
+                     and not args.no_reference)
+    for rate in (25, 60):
+        dt = 1.0 / rate
+        frames = max(10, int(round(args.seconds * rate)))
+        reference = None
+        if accuracy_here:
+            substeps = 4 * verlet_substeps(model, dt)
+            print(f"   reference at {rate} fps: Verlet, {substeps} substeps per frame ...",
+                  flush=True)
+            reference = reference_run(model, dt, frames, pins, substeps)
+        chosen_integrators = integrators(model, dt)
+        if args.default_only:
+            numpy_ms = math.nan
+            chosen_integrators = dict(list(chosen_integrators.items())[:1])
+        else:
+            numpy_ms = numpy_explicit_ms(model, dt, frames, pins)
+            print(f"   {rate} fps: plain NumPy explicit ({verlet_substeps(model, dt)} "
+                  f"substeps): {numpy_ms:.1f} ms/frame")
+        for name, integrator in chosen_integrators.items():
+            integrator.step(model, model.state(), dt)  # compile / factorise outside timing
+            record = [] if reference is not None else None
+            seconds, failures, retries, _ = run(model, integrator, dt, frames, pins,
+                                                record=record,
+                                                budget=None if record is not None else 30.0)
+            ms = seconds[1:] * 1e3  # the first step includes the factorisation
+            rms = (float(np.sqrt(np.mean(rms_per_frame(record, reference) ** 2)))
+                   if record is not None else math.nan)
+            if record is not None and label == "10k / 45k":  # the picture's mesh
+                curves[(rate, name)] = rms_per_frame(record, reference)
+            print(f"   {rate} fps {name:37s} median {np.median(ms):7.2f} ms  p90 "
+                  f"{np.percentile(ms, 90):7.2f} ms  x{numpy_ms / np.median(ms):7.1f} vs "
+                  f"NumPy  RMS {rms * 1e3:6.3f} mm  failures {failures} retries {retries}"
+                  f"  ({len(seconds)} frames)",
+                  flush=True)
+            rows.append((label, model.node_count, model.spring_count, f"{rate} fps {name}",
+                         float(np.median(ms)), float(np.percentile(ms, 90)), rms,
+                         numpy_ms / np.median(ms), failures))
+            if name.startswith("projective (default"):
+                print(f"   {rate} fps   of which {integrator.iterations_for(dt)} global "
+                      f"solves, {global_solve_ms(integrator, model):.2f} ms each (median, "
+                      f"timed after the run)", flush=True)
+    if paper_nodes:
+        print(f"   (the paper's row: {paper_nodes} masses; ours differs by "
+              f"{model.node_count - paper_nodes:+d})")
+    print()
+
+
+def stability_run(minutes: float) -> None:
+    """The default integrator on the 10k head for `minutes` simulated minutes at 60 fps."""
+    x, pairs, spacing = head_shell(cells=36, thickness=2.5)
+    model = rubber_model(x, pairs, spacing)
+    pins = neck(model, spacing)
+    frames = int(minutes * 60 * 60)
+    print(f"== stability: {minutes:g} simulated minutes at 60 fps on "
+          f"{model.node_count}/{model.spring_count} with the default integrator")
+    integrator = default_integrator()
+    seconds, failures, retries, state = run(model, integrator, 1 / 60, frames, pins,
+                                            progress=frames // 10)
+    drift = np.abs(state.x - model.rest_positions).max()
+    finite = bool(np.all(np.isfinite(state.x)))
+    print(f"   {frames} steps: failures {failures}, retries {retries}, finite {finite}, "
+          f"max displacement at the end {drift * 1e3:.1f} mm, median "
+          f"{np.median(seconds) * 1e3:.2f} ms, p90 {np.percentile(seconds, 90) * 1e3:.2f} ms")
 
 
 def picture(curves, path):

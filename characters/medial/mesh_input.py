@@ -43,6 +43,27 @@ def load_closed_mesh(mesh, *, check_self_intersections: bool = True,
     file, non-finite vertices, more than `max_faces` faces, an open, inconsistently wound, too
     coarse or self-intersecting surface.
     """
+    mesh, source = _read_mesh(mesh)
+    _check_contents(mesh, source, max_faces)
+    before = len(mesh.vertices)
+    mesh.merge_vertices(merge_tex=True, merge_norm=True)
+    mesh.update_faces(mesh.nondegenerate_faces())
+    mesh.update_faces(mesh.unique_faces())
+    mesh.remove_unreferenced_vertices()
+    if len(mesh.vertices) != before:
+        log.info("%s: merged/removed %d duplicate or unused vertices (texture seams)",
+                 source, before - len(mesh.vertices))
+    _check_closed(mesh, source)
+    if mesh.volume < 0:
+        mesh.invert()
+        log.info("%s: faces were wound inside-out; inverted them", source)
+    if check_self_intersections:
+        _repair_small_self_intersections(mesh, source)
+    return mesh
+
+
+def _read_mesh(mesh):
+    """(a Trimesh of our own, the name errors give it) from a path or a Trimesh."""
     trimesh = _trimesh()
     if isinstance(mesh, (str, PathLike)):
         try:
@@ -63,7 +84,10 @@ def load_closed_mesh(mesh, *, check_self_intersections: bool = True,
         mesh = mesh.copy()
     else:
         raise TypeError(f"mesh must be a path or a trimesh.Trimesh, got {type(mesh).__name__}")
+    return mesh, source
 
+
+def _check_contents(mesh, source: str, max_faces: int) -> None:
     if len(mesh.faces) == 0:
         raise ValueError(f"{source} has no faces; expected a closed triangle surface")
     finite = np.isfinite(np.asarray(mesh.vertices, dtype=np.float64)).all(axis=1)
@@ -77,15 +101,10 @@ def load_closed_mesh(mesh, *, check_self_intersections: bool = True,
             f"of every vertex) is limited to {max_faces:,} faces, beyond which it takes "
             f"minutes: simplify the mesh first (trimesh's simplify_quadric_decimation), or "
             f"lift the limit with max_faces={len(mesh.faces)}")
-    before = len(mesh.vertices)
-    mesh.merge_vertices(merge_tex=True, merge_norm=True)
-    mesh.update_faces(mesh.nondegenerate_faces())
-    mesh.update_faces(mesh.unique_faces())
-    mesh.remove_unreferenced_vertices()
-    if len(mesh.vertices) != before:
-        log.info("%s: merged/removed %d duplicate or unused vertices (texture seams)",
-                 source, before - len(mesh.vertices))
 
+
+def _check_closed(mesh, source: str) -> None:
+    """Closed, manifold, consistently wound and fine enough for a skeleton."""
     edges = mesh.edges_sorted
     _, counts = np.unique(edges, axis=0, return_counts=True)
     boundary = int(np.sum(counts == 1))
@@ -107,25 +126,24 @@ def load_closed_mesh(mesh, *, check_self_intersections: bool = True,
         raise ValueError(
             f"{source} is too coarse: {len(mesh.vertices)} vertices, need at least {MIN_VERTICES} "
             "for a skeleton (subdivide it, e.g. trimesh.remesh.subdivide)")
-    if mesh.volume < 0:
-        mesh.invert()
-        log.info("%s: faces were wound inside-out; inverted them", source)
-    if check_self_intersections:
-        vertices = np.array(mesh.vertices, dtype=np.float64)
-        faces = np.asarray(mesh.faces)
-        max_shift = SMALL_INTERSECTION * float(mesh.edges_unique_length.mean())
-        pairs, moved = repair_small_self_intersections(vertices, faces, max_shift=max_shift)
-        if len(pairs):
-            raise ValueError(
-                f"{source} intersects itself: {len(pairs)} pairs of faces cross (e.g. faces "
-                f"{int(pairs[0, 0])} and {int(pairs[0, 1])}) by more than {SMALL_INTERSECTION:g} "
-                "of the mean edge length; expected a surface that bounds one solid - union "
-                "overlapping parts first (trimesh.boolean.union, engine='manifold')")
-        if moved:
-            mesh.vertices = vertices
-            log.info("%s: pushed %d vertices back through faces they poked through (small "
-                     "self-intersections)", source, moved)
-    return mesh
+
+
+def _repair_small_self_intersections(mesh, source: str) -> None:
+    """Push back vertices that poke slightly through a face; refuse larger crossings."""
+    vertices = np.array(mesh.vertices, dtype=np.float64)
+    faces = np.asarray(mesh.faces)
+    max_shift = SMALL_INTERSECTION * float(mesh.edges_unique_length.mean())
+    pairs, moved = repair_small_self_intersections(vertices, faces, max_shift=max_shift)
+    if len(pairs):
+        raise ValueError(
+            f"{source} intersects itself: {len(pairs)} pairs of faces cross (e.g. faces "
+            f"{int(pairs[0, 0])} and {int(pairs[0, 1])}) by more than {SMALL_INTERSECTION:g} "
+            "of the mean edge length; expected a surface that bounds one solid - union "
+            "overlapping parts first (trimesh.boolean.union, engine='manifold')")
+    if moved:
+        mesh.vertices = vertices
+        log.info("%s: pushed %d vertices back through faces they poked through (small "
+                 "self-intersections)", source, moved)
 
 
 #: self-intersections where one vertex pokes through a face by less than this fraction of the

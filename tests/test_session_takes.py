@@ -70,3 +70,19 @@ def test_train_reports_consistency_and_draws_it(several, tmp_path, capsys):
     assert "hand_lift_odd strays from the others" in text
     consistency = tmp_path / "show-consistency.png"
     assert consistency.stat().st_size > 5_000
+
+
+@pytest.mark.slow
+def test_a_session_bank_takes_its_still_stage_from_still_after(several):
+    """build_bank with the session's rate sets the bank's still stage from still_after (0.4 s
+    at 25 fps: 10 frames); without a rate the stage is off."""
+    from mop.session import load_session
+    from mop.session.build import build_bank, open_store, performer_templates, session_takes
+    config = load_session(several)
+    performer = config.performer("glove")
+    templates, *_ = performer_templates(config, performer,
+                                        session_takes(config, open_store(config.takes)),
+                                        where="")
+    bank = build_bank(templates, performer, config.fps)
+    assert bank.config.still_frames == round(performer.still_after * config.fps) == 10
+    assert build_bank(templates, performer).config.still_frames == 0

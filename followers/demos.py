@@ -41,6 +41,9 @@ AVERAGE_ROUNDS = 5
 SPREAD_SMOOTHING = 0.03
 # a take is called the outlier when its distance exceeds the others' median by this factor
 OUTLIER_FACTOR = 1.5
+# aligning two takes holds two (S + 1) x (N + 1) float tables: at most this many cells each
+# (16 bytes a cell: 0.8 GB), about two takes of 7,000 frames
+ALIGN_CELLS = 50_000_000
 
 
 @dataclass(frozen=True)
@@ -208,6 +211,11 @@ def combine(takes, *, config: FollowerConfig | None = None,
         if take.shape[1] != D:
             raise ValueError(f"every take of {name} needs the same channels: take 0 has {D}, "
                              f"take {i} has {take.shape[1]}")
+    longest = max(t.shape[0] for t in takes)
+    if len(takes) > 1 and longest * int(np.median([t.shape[0] for t in takes])) > ALIGN_CELLS:
+        raise ValueError(f"the takes of {name} are too long to align (the longest has {longest} "
+                         f"frames; aligning it would take {longest ** 2 * 16 / 1e9:.1f} GB or "
+                         f"so): cut each take to the action itself")
     lengths = np.array([t.shape[0] for t in takes])
     if len(takes) == 1:
         return Demonstrations(takes[0], np.zeros_like(takes[0]), None, np.zeros(1), lengths,

@@ -93,6 +93,8 @@ def test_takes_are_lists_of_arrays_and_nothing_else():
 
 def test_bad_takes_are_named():
     good = curve()
+    with pytest.raises(ValueError, match="takes of template 'long' are too long to align"):
+        FollowerBank({"long": [np.zeros((8000, 1)), np.zeros((7500, 1))]})
     with pytest.raises(ValueError, match="template 'wave', take 1 has non-finite"):
         FollowerBank({"wave": [good, np.where(np.arange(120)[:, None] == 5, np.nan, good)]})
     with pytest.raises(ValueError, match="every take of template 'wave' needs the same channels"):

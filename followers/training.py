@@ -1,21 +1,27 @@
 """A follower from several demonstrations of one action: a left-to-right HMM trained with
-Baum–Welch (hmmlearn), keeping the left-to-right topology.
+Baum–Welch, keeping the left-to-right topology.
 
 The chain has one state per frame of a typical demonstration and the transitions
-``i -> i, i + 1, i + 2``; every other transition starts at zero, and Baum–Welch never moves a
-zero probability, so training keeps that topology. The initial distribution is fixed on the
-first state. The trained means become the follower's template and the trained per-state
-variances its sigma (never below the single-template default, so three demonstrations that
+``i -> i, i + 1, i + 2``; no other transition exists, so training keeps that topology. The
+chain starts in the first state. The means start from the demonstrations aligned by dynamic
+time warping; the forward-backward pass runs in log space on the band of the transition
+matrix (``followers._baum_welch``), so no demonstration underflows and a step costs S (2 +
+skips) per frame, not S². Each variance is at least ``(0.05 rms spread)²`` of the
+demonstrations (the constrained maximum, so every iteration still raises the likelihood).
+The trained means become the follower's template and the trained per-state standard
+deviations its sigma (never below the single-template default, so three demonstrations that
 happen to agree do not make a brittle follower).
 """
 from __future__ import annotations
 
 import logging
+import time
 from dataclasses import dataclass
 
 import numba as nb
 import numpy as np
 
+from followers._baum_welch import accumulate, emission_log, forward_backward
 from followers.defaults import as_template, default_sigma
 from followers.follower import Follower
 from followers.preprocessing import resample
@@ -29,24 +35,16 @@ class TrainedModel:
 
     means : (S, D) float [input units]; sigma : (S, D) float [input units]
     transitions : (S, S) float: trained transition matrix (left-to-right)
-    log_likelihoods : (I,) float: total log-likelihood of the demonstrations after each
-        Baum–Welch iteration (non-decreasing up to rounding)
-    hmm : the trained ``hmmlearn.hmm.GaussianHMM``
+    log_likelihoods : (I,) float: total log-likelihood of the demonstrations before each
+        Baum–Welch update [nats] (non-decreasing up to rounding)
+    seconds : float: the time training took
     """
 
     means: np.ndarray
     sigma: np.ndarray
     transitions: np.ndarray
     log_likelihoods: np.ndarray
-    hmm: object
-
-
-def _hmmlearn():
-    try:
-        from hmmlearn import hmm
-    except ImportError as exc:  # pragma: no cover - depends on the environment
-        raise ImportError("training followers needs hmmlearn: pip install 'mop[train]'") from exc
-    return hmm
+    seconds: float
 
 
 def left_to_right(states: int, *, skips: int = 1) -> np.ndarray:
@@ -122,14 +120,13 @@ def aligned_statistics(demos: list[np.ndarray], states: int) -> tuple[np.ndarray
 
 
 def train_hmm(demonstrations, *, states: int | None = None, iterations: int = 10,
-              skips: int = 1, random_state: int = 0) -> TrainedModel:
+              skips: int = 1) -> TrainedModel:
     """Train a left-to-right Gaussian HMM (diagonal covariances) on demonstrations of one action.
 
     demonstrations : list of (T_i, D) float arrays [input units] (gaps filled; one is allowed).
     states : int, optional: number of states. Default: the median demonstration length.
     iterations : int >= 1: Baum–Welch iterations. skips : int >= 0: states a transition may skip.
     """
-    hmm = _hmmlearn()
     if isinstance(demonstrations, np.ndarray):
         demonstrations = [demonstrations]
     demos = [as_template(d, name=f"demonstration {i}") for i, d in enumerate(demonstrations)]
@@ -155,32 +152,66 @@ def train_hmm(demonstrations, *, states: int | None = None, iterations: int = 10
 
     # initial means and spreads: the demonstrations aligned by dynamic time warping to the
     # median-length one, then averaged per state (Baum-Welch only refines from there)
+    began = time.perf_counter()
     means, var = aligned_statistics(demos, S)
     pooled = np.concatenate(demos, axis=0).std(axis=0)
     floor = (0.05 * max(float(np.sqrt(np.mean(pooled ** 2))), 1e-6)) ** 2
-    covars = var + floor
-
-    model = hmm.GaussianHMM(n_components=S, covariance_type="diag", n_iter=int(iterations),
-                            tol=0.0, min_covar=floor, init_params="", params="tmc",
-                            random_state=random_state, implementation="scaling")
-    model.startprob_ = np.eye(S)[0]
-    model.transmat_ = left_to_right(S, skips=int(skips))
-    model.means_ = means
-    model.covars_ = covars
-    hmm_logger = logging.getLogger("hmmlearn.base")
-    level = hmm_logger.level
-    hmm_logger.setLevel(logging.ERROR)  # its "not converging" note is about rounding at tol=0
-    try:
-        model.fit(np.concatenate(demos, axis=0), lengths)
-    finally:
-        hmm_logger.setLevel(level)
-    history = np.array(model.monitor_.history, dtype=np.float64)
-    trained_var = np.diagonal(model.covars_, axis1=1, axis2=2)
+    var = var + floor
+    log_a = _banded(left_to_right(S, skips=int(skips)), int(skips) + 2)
+    history = baum_welch(demos, means, var, log_a, int(iterations), floor)
+    transitions = _dense(log_a)
     log.debug("trained %d-state left-to-right HMM on %d demonstrations: log-likelihood %s",
               S, len(demos), history)
-    return TrainedModel(means=np.ascontiguousarray(model.means_),
-                        sigma=np.sqrt(trained_var), transitions=model.transmat_.copy(),
-                        log_likelihoods=history, hmm=model)
+    return TrainedModel(means=means, sigma=np.sqrt(var), transitions=transitions,
+                        log_likelihoods=history, seconds=time.perf_counter() - began)
+
+
+def _banded(matrix: np.ndarray, J: int) -> np.ndarray:
+    """(S, J) log transition probabilities i -> i + j of a left-to-right ``matrix (S, S)``."""
+    S = matrix.shape[0]
+    band = np.zeros((S, J))
+    for j in range(J):
+        band[:S - j, j] = np.diagonal(matrix, j)
+    with np.errstate(divide="ignore"):
+        return np.log(band)
+
+
+def _dense(log_a: np.ndarray) -> np.ndarray:
+    S, J = log_a.shape
+    matrix = np.zeros((S, S))
+    for j in range(J):
+        matrix[np.arange(S - j), np.arange(j, S)] = np.exp(log_a[:S - j, j])
+    return matrix
+
+
+def baum_welch(demos: list[np.ndarray], means: np.ndarray, var: np.ndarray, log_a: np.ndarray,
+               iterations: int, floor: float) -> np.ndarray:
+    """``iterations`` Baum–Welch updates of ``means``, ``var`` (S, D) and the banded log
+    transitions ``log_a`` (S, J), in place; each variance at least ``floor``. A state no
+    demonstration visits keeps its values. Returns the log-likelihood before each update."""
+    S, D = means.shape
+    history = np.empty(iterations)
+    work = [(np.empty((d.shape[0], S)), np.empty((d.shape[0], S)), np.empty((d.shape[0], S)))
+            for d in demos]
+    for it in range(iterations):
+        weight, first, second = np.zeros(S), np.zeros((S, D)), np.zeros((S, D))
+        moves = np.zeros_like(log_a)
+        total = 0.0
+        for x, (log_b, alpha, beta) in zip(demos, work):
+            emission_log(x, means, var, log_b)
+            loglik = forward_backward(log_b, log_a, alpha, beta)
+            accumulate(x, log_b, log_a, alpha, beta, loglik, weight, first, second, moves)
+            total += loglik
+        history[it] = total
+        seen = weight > 1e-12 * max(1.0, weight.max())
+        w = weight[seen, None]
+        means[seen] = first[seen] / w
+        var[seen] = np.maximum(second[seen] / w - means[seen] ** 2, floor)
+        rows = moves.sum(axis=1)
+        moving = rows > 0.0
+        with np.errstate(divide="ignore"):
+            log_a[moving] = np.log(moves[moving] / rows[moving, None])
+    return history
 
 
 def train_follower(demonstrations, *, states: int | None = None, iterations: int = 10,

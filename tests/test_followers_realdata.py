@@ -458,3 +458,87 @@ def test_wiimote_files_read_as_published():
     lengths = [len(s) for s in X + Xt]
     assert min(lengths) == 29 and max(lengths) == 361
     assert all(s.shape[1] == 1 and np.isfinite(s).all() for s in X + Xt)
+
+
+# ---- training from several demonstrations, on every class ---------------------------------------
+
+def _complete(takes):
+    """Takes without their missing rows (the Wiimote files pad a few with '?')."""
+    return [x[~np.isnan(x).any(axis=1)] for x in takes]
+
+
+def _every_class(wiimote, basic_motions):
+    X, y, Xt, yt = wiimote
+    B, b, Bt, bt = basic_motions
+    return {"Wiimote": (_complete(X + Xt), np.concatenate([y, yt])),
+            "BasicMotions": (list(B) + list(Bt), np.concatenate([b, bt]))}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("k", [3, 5, 10])
+def test_training_succeeds_on_every_class_of_both_sets(k, wiimote, basic_motions):
+    """Every class of PickupGestureWiimoteZ (10) and BasicMotions (4), from its first k
+    recordings: a finite follower whose training raised the likelihood at every iteration
+    (hmmlearn's scaled forward pass failed on 25 of 100 Wiimote and 9 of 40 BasicMotions fits
+    at k = 3 with underflow or an all-NaN template)."""
+    from followers import train_follower, train_hmm
+    for name, (X, y) in _every_class(wiimote, basic_motions).items():
+        for label in sorted(set(y)):
+            demos = [X[i] for i in np.nonzero(y == label)[0][:k]]
+            trained = train_hmm(demos)
+            history = trained.log_likelihoods
+            assert np.isfinite(history).all(), (name, label)
+            assert np.all(np.diff(history) >= -1e-9 * np.abs(history[1:])), (name, label)
+            assert np.isfinite(trained.means).all() and (trained.sigma > 0).all()
+            follower = train_follower(demos)
+            assert np.isfinite(follower.template).all() and np.isfinite(follower.sigma).all()
+            assert follower.length == int(np.median([len(d) for d in demos]))
+
+
+def _recognised(bank, owner, takes, labels):
+    names = list(bank.actions) + [None]
+    hits = []
+    for x, label in zip(takes, labels):
+        action = bank.follow(x)["action"]
+        for part in (0.5, 1.0):
+            shown = names[action[max(0, int(part * len(x)) - 1)]]
+            hits.append(shown is not None and owner[shown] == label)
+    return float(np.mean(hits))
+
+
+def _trained_against_each_demonstration(X, y, Xt, yt, k):
+    from followers import train_follower
+    classes = sorted(set(y))
+    demos = {c: [X[i] for i in np.nonzero(y == c)[0][:k]] for c in classes}
+    each = {f"{c}#{i}": d for c, ds in demos.items() for i, d in enumerate(ds)}
+    owner = {**{c: c for c in classes}, **{n: n.split("#")[0] for n in each}}
+    trained = FollowerBank({c: train_follower(ds) for c, ds in demos.items()})
+    return (_recognised(trained, owner, Xt, yt),
+            _recognised(FollowerBank(each), owner, Xt, yt))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("k", [3, 5, 10])
+def test_trained_followers_recognise_basic_motions_as_well_as_each_demonstration(
+        k, basic_motions):
+    """The first k training recordings of each activity, as one trained follower or as k
+    templates; the test split's 40 recordings after half and all of each (80 decisions):
+    98.75 / 98.75 / 100 % trained against 95 / 97.5 / 93.75 % with each demonstration a
+    template at k = 3 / 5 / 10."""
+    X, y, Xt, yt = basic_motions
+    trained, each = _trained_against_each_demonstration(X, y, Xt, yt, k)
+    assert trained >= each, (trained, each)
+
+
+@pytest.mark.xfail(strict=True, reason="the averaged model loses to the demonstrations "
+                   "themselves on Wiimote gestures, whose takes differ in length up to 12x")
+@pytest.mark.slow
+@pytest.mark.parametrize("k", [3, 5])
+def test_trained_followers_recognise_wiimote_gestures_as_well_as_each_demonstration(
+        k, wiimote):
+    """As above on the 10 Wiimote gestures (5 training recordings each; the 50 test ones, 100
+    decisions): trained 59 / 63 % against 60 / 68 % at k = 3 / 5; on the training split alone
+    (k = 3, the other two recordings as inputs, three draws) 46.7 against 55.8 %."""
+    X, y, Xt, yt = wiimote
+    trained, each = _trained_against_each_demonstration(_complete(X), y, _complete(Xt), yt, k)
+    assert trained >= each, (trained, each)

@@ -6,8 +6,6 @@ import pytest
 from followers import (Confusability, FollowerBank, align, confusability, fill_gaps,
                        fit_normaliser, normalise, resample, time_warp, train_follower, train_hmm)
 
-pytest.importorskip("hmmlearn")
-
 
 def smooth_template(rng, T, D, scale=1.0):
     steps = rng.normal(size=(T + 8, D))
@@ -94,6 +92,61 @@ def test_baum_welch_keeps_left_to_right_topology_and_improves(rng):
     assert trained.means.shape == trained.sigma.shape == (60, 2)
     # the trained spread reflects the demonstrations' noise (0.1), not the range of motion
     assert 0.05 < np.median(trained.sigma) < 0.5
+
+
+def _dense_baum_welch(demos, means, var, A):
+    """One Baum-Welch update written plainly: dense (S, S) matrices, logs throughout."""
+    S = means.shape[0]
+    logA = np.log(np.where(A > 0, A, 1e-300))
+    logA[A == 0] = -np.inf
+    weight, first, second, moves, total = np.zeros(S), 0.0, 0.0, np.zeros((S, S)), 0.0
+    for x in demos:
+        N = len(x)
+        logB = np.array([[-0.5 * np.sum(np.log(2 * np.pi * var[i]) + (x[t] - means[i]) ** 2
+                                        / var[i]) for i in range(S)] for t in range(N)])
+        alpha, beta = np.full((N, S), -np.inf), np.zeros((N, S))
+        alpha[0, 0] = logB[0, 0]
+        for t in range(1, N):
+            alpha[t] = np.logaddexp.reduce(alpha[t - 1][:, None] + logA, axis=0) + logB[t]
+        for t in range(N - 2, -1, -1):
+            beta[t] = np.logaddexp.reduce(logA + (logB[t + 1] + beta[t + 1])[None, :], axis=1)
+        ll = np.logaddexp.reduce(alpha[-1])
+        gamma = np.exp(alpha + beta - ll)
+        for t in range(N - 1):
+            moves += np.exp(alpha[t][:, None] + logA + (logB[t + 1] + beta[t + 1])[None, :] - ll)
+        weight += gamma.sum(axis=0)
+        first = first + gamma.T @ x
+        second = second + gamma.T @ x ** 2
+        total += ll
+    new_means = first / weight[:, None]
+    new_var = second / weight[:, None] - new_means ** 2
+    return total, new_means, new_var, moves / moves.sum(axis=1, keepdims=True)
+
+
+def test_baum_welch_matches_a_dense_reference_and_hmmlearn(rng):
+    """The banded log-space update equals a plain dense one, and its log-likelihood equals
+    hmmlearn's forward algorithm on the same model."""
+    from followers.training import _banded, _dense, baum_welch, left_to_right
+    S, D = 6, 2
+    demos = [rng.normal(size=(n, D)).cumsum(axis=0) for n in (12, 15, 9)]
+    means, var = rng.normal(size=(S, D)), rng.uniform(0.5, 2.0, size=(S, D))
+    A = left_to_right(S, skips=1)
+    log_a = _banded(A, 3)
+    np.testing.assert_allclose(_dense(log_a), A, atol=1e-15)
+    ours_means, ours_var = means.copy(), var.copy()
+    history = baum_welch(demos, ours_means, ours_var, log_a, 1, 1e-12)
+    total, ref_means, ref_var, ref_A = _dense_baum_welch(demos, means, var, A)
+    assert history[0] == pytest.approx(total, rel=1e-12)
+    np.testing.assert_allclose(ours_means, ref_means, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(ours_var, ref_var, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(_dense(log_a), ref_A, rtol=1e-9, atol=1e-15)
+    hmmlearn = pytest.importorskip("hmmlearn.hmm")
+    model = hmmlearn.GaussianHMM(n_components=S, covariance_type="diag", init_params="",
+                                 implementation="log")
+    model.startprob_, model.transmat_ = np.eye(S)[0], A
+    model.means_, model.covars_ = means, var
+    assert history[0] == pytest.approx(model.score(np.vstack(demos), [len(d) for d in demos]),
+                                       rel=1e-10)
 
 
 def test_trained_follower_follows_a_new_performance(rng):

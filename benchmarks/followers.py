@@ -151,6 +151,23 @@ def timing(args):
     start = time.perf_counter()
     FollowerBank({f"a{k}": pool[k] for k in range(32)})
     say(f"FollowerBank(32 x 300 x 60): {1e3 * (time.perf_counter() - start):.1f} ms")
+    build_cost(rng, args.quick)
+
+
+def build_cost(rng, quick: bool) -> None:
+    """Bank construction against the number of templates K and their length T: linear when
+    the time per template-frame stays flat."""
+    say("\n== bank construction (3 channels) ==")
+    say("     K |    T | build [s] | per template-frame [us]")
+    sizes = [(100, 50), (1000, 50), (3000, 50), (100, 1000), (100, 3000)]
+    if not quick:
+        sizes.insert(3, (10_000, 50))
+    for K, T in sizes:
+        templates = {f"a{k}": np.cumsum(rng.normal(size=(T, 3)), axis=0) for k in range(K)}
+        start = time.perf_counter()
+        FollowerBank(templates)
+        took = time.perf_counter() - start
+        say(f"{K:>6} | {T:>4} | {took:9.3f} | {1e6 * took / (K * T):8.2f}")
 
 
 # ---- progress on time-warped real gestures -------------------------------------------------------

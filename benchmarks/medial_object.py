@@ -97,19 +97,17 @@ def _label(image, text):
 
 def pictures(folder) -> list:
     """docs/img/medial_duck_skeleton.png, medial_caterpillar_joints.png, medial_materials.png."""
-    import matplotlib
+    os.makedirs(folder, exist_ok=True)
+    return [_duck_picture(folder), _caterpillar_picture(folder), _materials_picture(folder)]
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+
+def _duck_picture(folder) -> str:
+    """The skeleton inside pybullet's duck (y up): the front half cut away."""
     import pybullet_data
     from PIL import Image
 
     from characters.medial import MedialObject
 
-    os.makedirs(folder, exist_ok=True)
-    written = []
-
-    # 1. the skeleton inside pybullet's duck (y up): the front half cut away
     duck = MedialObject.from_mesh(os.path.join(pybullet_data.getDataPath(), "duck.obj"))
     vertices, faces = duck.rest_vertices, duck.faces
     bounds = np.stack([vertices.min(0), vertices.max(0)])
@@ -125,11 +123,17 @@ def pictures(folder) -> list:
         panels.append(_label(image, text))
     path = os.path.join(folder, "medial_duck_skeleton.png")
     Image.fromarray(np.concatenate(panels, axis=1)).save(path, optimize=True)
-    written.append(path)
+    return path
 
-    # 2. the caterpillar (y up): sections at rest, then four joints rotated at once
+
+def _caterpillar_picture(folder) -> str:
+    """The caterpillar (y up): sections at rest, then four joints rotated at once, then one
+    joint bent hard (the surface folds on the inner side, stretches outside)."""
+    from PIL import Image
+
+    from characters.medial import MedialObject
+
     creature = MedialObject.shipped("medial_caterpillar", constraint="spring_reduction")
-
     colours = SECTION_COLOURS[creature.joints.section_of_vertex % len(SECTION_COLOURS)]
     rest = creature.surface()
     pose = {"jaw": 0.55, "head": 0.35, "front": 0.25, "tail": 0.35}
@@ -146,7 +150,6 @@ def pictures(folder) -> list:
         image = _render([(surface, creature.faces, colours, "matte")], size=(480, 360),
                         eye=eye, target=centre, bounds=bounds)
         panels.append(_label(image, text))
-    # close-up of one joint bent hard: the surface folds on the inner side, stretches outside
     creature.reset()
     for _ in range(60):
         creature.step(FRAME, {"front": 0.6})
@@ -157,9 +160,19 @@ def pictures(folder) -> list:
     panels.append(_label(image, "front 0.6 rad: folded above the joint, stretched below"))
     path = os.path.join(folder, "medial_caterpillar_joints.png")
     Image.fromarray(np.concatenate(panels, axis=1)).save(path, optimize=True)
-    written.append(path)
+    return path
 
-    # 3. the five presets: surface speed after the bunny's top is flung by 0.5 rad and held
+
+def _materials_picture(folder) -> str:
+    """The five presets: surface speed after the bunny's top is flung by 0.5 rad and held."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import pybullet_data
+
+    from characters.medial import MedialObject
+
     bunny = os.path.join(pybullet_data.getDataPath(), "bunny.obj")
     cut = [dict(section="body", names=["bottom", "top"], point=[0.0, 0.0, 0.2],
                 normal=[0.0, 0.0, 1.0], axis=[1.0, 0.0, 0.0])]
@@ -189,8 +202,7 @@ def pictures(folder) -> list:
     path = os.path.join(folder, "medial_materials.png")
     figure.savefig(path, dpi=90)
     plt.close(figure)
-    written.append(path)
-    return written
+    return path
 
 
 def main(argv=None) -> int:

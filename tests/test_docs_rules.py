@@ -1,7 +1,8 @@
 """The writing rules, checked: the README a newcomer reads first stays short and opens with the
 two commands; guides stay guides (their API in one screen first, none over 30 KB); every figure
-the README quotes links to a table of docs/benchmarks.md that exists; and no file speaks of how
-or when the project was built (numbered revisions, sittings, tickets, scratch paths)."""
+the README quotes links to a table of docs/benchmarks.md that exists, and every benchmark script
+has its dated table there; and no file speaks of how or when the project was built (numbered
+revisions, sittings, tickets, scratch paths)."""
 import re
 from pathlib import Path
 
@@ -100,3 +101,13 @@ def test_every_readme_link_into_the_docs_lands():
             if anchor not in anchors:
                 broken.append(f"{target}#{anchor}")
     assert not broken, "README links that land nowhere: " + ", ".join(broken)
+
+
+def test_every_benchmark_script_has_a_dated_table():
+    headings = [line for line in (ROOT / "docs" / "benchmarks.md").read_text().splitlines()
+                if line.startswith("## ")]
+    missing = [script.name for script in sorted((ROOT / "benchmarks").glob("*.py"))
+               if not any(re.search(rf"`benchmarks/{re.escape(script.name)}` \(\d{{4}}-\d\d-\d\d\)",
+                                    heading) for heading in headings)]
+    assert not missing, ("benchmarks without a '## Name — `benchmarks/x.py` (YYYY-MM-DD)' table "
+                         "in docs/benchmarks.md: " + ", ".join(missing))

@@ -175,49 +175,9 @@ def clean_surface(vertices: np.ndarray, faces: np.ndarray, *, colors=None,
     merged_vertices = vertices[first]
     merged_colors = None if colors is None else np.asarray(colors)[first]
     merged_faces = inverse[faces]
-    # 2. degenerate faces: repeated vertex or (numerically) zero area
-    a, b, c = (merged_vertices[merged_faces[:, i]] for i in range(3))
-    double_area = np.linalg.norm(np.cross(b - a, c - a), axis=1)
-    repeated = ((merged_faces[:, 0] == merged_faces[:, 1])
-                | (merged_faces[:, 1] == merged_faces[:, 2])
-                | (merged_faces[:, 2] == merged_faces[:, 0]))
-    degenerate = repeated | (double_area <= (diagonal * 1e-7) ** 2)
-    if degenerate.any():
-        repairs.append(f"removed {int(degenerate.sum())} degenerate faces")
-        merged_faces = merged_faces[~degenerate]
-    # 3. duplicate faces (same three vertices)
-    _, keep = np.unique(np.sort(merged_faces, axis=1), axis=0, return_index=True)
-    if len(keep) < len(merged_faces):
-        repairs.append(f"removed {len(merged_faces) - len(keep)} duplicate faces")
-        merged_faces = merged_faces[np.sort(keep)]
-    if len(merged_faces) < 4:
-        raise ValueError(f"{source}: only {len(merged_faces)} usable faces left; a closed solid "
-                         f"needs at least 4")
-    # 4. holes
-    edges, counts = edge_use_counts(merged_faces)
-    if np.any(counts > 2):
-        bad = edges[counts > 2]
-        raise ValueError(
-            f"{source}: {len(bad)} non-manifold edges (shared by more than two faces), e.g. "
-            f"between vertices at {merged_vertices[bad[0, 0]].round(4).tolist()} and "
-            f"{merged_vertices[bad[0, 1]].round(4).tolist()}; expected a closed 2-manifold")
-    if np.any(counts == 1):
-        description = _describe_holes(merged_vertices, merged_faces)
-        trimesh = _trimesh()
-        patch = trimesh.Trimesh(merged_vertices, merged_faces, process=False)
-        trimesh.repair.fill_holes(patch)
-        filled = np.asarray(patch.faces, dtype=np.int64)
-        if len(patch.vertices) != len(merged_vertices):
-            filled = None  # trimesh added vertices: we need a stable vertex numbering
-        if filled is not None:
-            _, counts_after = edge_use_counts(filled)
-        if filled is None or np.any(counts_after != 2):
-            raise ValueError(f"{source}: the surface is open and could not be closed: "
-                             f"{description}. Close these holes in a modeller, or pass a "
-                             f"watertight mesh")
-        repairs.append(f"filled holes ({description})")
-        merged_faces = filled
-    # 5. unused vertices
+    merged_faces = _drop_bad_faces(merged_vertices, merged_faces, diagonal, repairs, source)
+    merged_faces = _close_holes(merged_vertices, merged_faces, repairs, source)
+    # unused vertices
     used = np.zeros(len(merged_vertices), dtype=bool)
     used[merged_faces.ravel()] = True
     new_index = np.full(len(merged_vertices), -1, dtype=np.int64)
@@ -227,12 +187,62 @@ def clean_surface(vertices: np.ndarray, faces: np.ndarray, *, colors=None,
     out_vertices = merged_vertices[used]
     out_colors = None if merged_colors is None else merged_colors[used]
     out_faces = new_index[merged_faces]
-    # 6. consistent outward winding
+    # consistent outward winding
     out_faces = _orient_outward(out_vertices, out_faces, repairs, source)
     index_map = new_index[inverse]
     for note in repairs:
         log.info("%s: %s", source, note)
     return CleanSurface(out_vertices, out_faces, index_map, out_colors, repairs)
+
+
+def _drop_bad_faces(vertices, faces, diagonal, repairs, source) -> np.ndarray:
+    """Faces without the degenerate (a repeated vertex or a numerically zero area) and the
+    duplicate ones (same three vertices); at least four must be left."""
+    a, b, c = (vertices[faces[:, i]] for i in range(3))
+    double_area = np.linalg.norm(np.cross(b - a, c - a), axis=1)
+    repeated = ((faces[:, 0] == faces[:, 1]) | (faces[:, 1] == faces[:, 2])
+                | (faces[:, 2] == faces[:, 0]))
+    degenerate = repeated | (double_area <= (diagonal * 1e-7) ** 2)
+    if degenerate.any():
+        repairs.append(f"removed {int(degenerate.sum())} degenerate faces")
+        faces = faces[~degenerate]
+    _, keep = np.unique(np.sort(faces, axis=1), axis=0, return_index=True)
+    if len(keep) < len(faces):
+        repairs.append(f"removed {len(faces) - len(keep)} duplicate faces")
+        faces = faces[np.sort(keep)]
+    if len(faces) < 4:
+        raise ValueError(f"{source}: only {len(faces)} usable faces left; a closed solid "
+                         f"needs at least 4")
+    return faces
+
+
+def _close_holes(vertices, faces, repairs, source) -> np.ndarray:
+    """The faces of a closed 2-manifold: holes filled by trimesh when it can do so without new
+    vertices; ValueError naming the non-manifold edges or the holes otherwise."""
+    edges, counts = edge_use_counts(faces)
+    if np.any(counts > 2):
+        bad = edges[counts > 2]
+        raise ValueError(
+            f"{source}: {len(bad)} non-manifold edges (shared by more than two faces), e.g. "
+            f"between vertices at {vertices[bad[0, 0]].round(4).tolist()} and "
+            f"{vertices[bad[0, 1]].round(4).tolist()}; expected a closed 2-manifold")
+    if not np.any(counts == 1):
+        return faces
+    description = _describe_holes(vertices, faces)
+    trimesh = _trimesh()
+    patch = trimesh.Trimesh(vertices, faces, process=False)
+    trimesh.repair.fill_holes(patch)
+    filled = np.asarray(patch.faces, dtype=np.int64)
+    if len(patch.vertices) != len(vertices):
+        filled = None  # trimesh added vertices: we need a stable vertex numbering
+    if filled is not None:
+        _, counts_after = edge_use_counts(filled)
+    if filled is None or np.any(counts_after != 2):
+        raise ValueError(f"{source}: the surface is open and could not be closed: "
+                         f"{description}. Close these holes in a modeller, or pass a "
+                         f"watertight mesh")
+    repairs.append(f"filled holes ({description})")
+    return filled
 
 
 def _orient_outward(vertices, faces, repairs, source) -> np.ndarray:

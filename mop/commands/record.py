@@ -325,6 +325,22 @@ def _capture(source, recorder, start: float, duration: float | None, label: str)
         progress.refresh()
 
 
+def _countdown(source, seconds: float, action: str) -> float:
+    """Count down `seconds` aloud, dropping what the source sends meanwhile; the start time."""
+    clock = source.clock
+    end_countdown = clock.now() + seconds
+    shown = None
+    while (left := end_countdown - clock.now()) > 0:
+        second = int(left) + 1
+        if second != shown:
+            print(f"  {action} starts in {second}...", flush=True)
+            shown = second
+        source.read(timeout=min(left, 0.05))   # keep the queue fresh; frames not kept
+    while source.read(timeout=0) is not None:
+        pass
+    return clock.now()
+
+
 def _record(args) -> int:
     from capture import open_source
     from mop.takes import TakeStore, check_name, performer_templates
@@ -340,24 +356,13 @@ def _record(args) -> int:
     source = open_source(args.source)
     recorder = None
     try:
-        clock = source.clock
         first = source.read(timeout=args.wait)
         if first is None:
             raise OSError(f"{args.source}: no frame within {args.wait:g} s (status "
                           f"{source.status.value}); is the performer's input running?")
         names = ", ".join(source.channels[:8]) + (", ..." if len(source.channels) > 8 else "")
         print(f"source {args.source}: {count(len(source.channels), 'channel')} ({names})")
-        end_countdown = clock.now() + args.countdown
-        shown = None
-        while (left := end_countdown - clock.now()) > 0:
-            second = int(left) + 1
-            if second != shown:
-                print(f"  {action} starts in {second}...", flush=True)
-                shown = second
-            source.read(timeout=min(left, 0.05))   # keep the queue fresh; frames not kept
-        while source.read(timeout=0) is not None:
-            pass
-        start = clock.now()
+        start = _countdown(source, args.countdown, action)
         info = source.describe()
         # what later processing of this take needs to interpret its numbers
         calibration = {key: info[key] for key in ("camera_matrix", "dist_coeffs",

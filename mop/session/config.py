@@ -321,7 +321,18 @@ def parse_session(user: Mapping[str, Any], *, where: str = "<session>",
     base = Path.cwd() if base is None else base
     top = _Reader(where, user, "")
     top.check_keys({"session", "performers", "characters", "actions", "outputs"})
+    stage = _parse_stage(top, defaults, base, path)
+    performers = _parse_performers(top, defaults, base)
+    characters = _parse_characters(top, defaults, base)
+    actions = _parse_actions(top, defaults, performers, characters)
+    return SessionConfig(
+        path=path, **stage, performers=tuple(performers), characters=tuple(characters),
+        actions=tuple(actions), outputs=_parse_outputs(top, defaults, base))
 
+
+def _parse_stage(top: _Reader, defaults: dict, base: Path, path: Path | None) -> dict:
+    """The [session] table: name, rate, blend, size, background, takes."""
+    where = top.where
     session = _Reader(where, _merge(defaults["session"], top.sub("session").table), "session")
     session.check_keys(set(defaults["session"]) | {"name"})
     fps = session.number("fps", integer=True)
@@ -347,6 +358,12 @@ def parse_session(user: Mapping[str, Any], *, where: str = "<session>",
     takes = (base / session.string("takes", required=True)).resolve()
     name = session.string("name") or (path.stem if path else "session")
 
+    return dict(name=name, fps=fps, blend=blend, size=size, background=background,
+                background_colour=background_colour, chroma_key=chroma_key, takes=takes)
+
+
+def _parse_performers(top: _Reader, defaults: dict, base: Path) -> list[PerformerConfig]:
+    where = top.where
     performers = []
     table = top.sub("performers")
     if not table.table:
@@ -373,6 +390,11 @@ def parse_session(user: Mapping[str, Any], *, where: str = "<session>",
             latency=float(entry.number("latency", low=0.0, high=1.0)),
             still_after=float(entry.number("still_after", low=0.0, high=60.0))))
 
+    return performers
+
+
+def _parse_characters(top: _Reader, defaults: dict, base: Path) -> list[CharacterConfig]:
+    where = top.where
     characters = []
     table = top.sub("characters")
     if not table.table:
@@ -401,6 +423,11 @@ def parse_session(user: Mapping[str, Any], *, where: str = "<session>",
             colour=entry.colour("colour"),
             options=MappingProxyType(dict(options))))
 
+    return characters
+
+
+def _parse_actions(top: _Reader, defaults: dict, performers, characters) -> list[ActionBinding]:
+    where = top.where
     performer_names = [p.name for p in performers]
     character_names = [c.name for c in characters]
     actions = []
@@ -445,6 +472,11 @@ def parse_session(user: Mapping[str, Any], *, where: str = "<session>",
                                      takes=several))
     _check_bindings(where, actions)
 
+    return actions
+
+
+def _parse_outputs(top: _Reader, defaults: dict, base: Path) -> OutputsConfig:
+    where = top.where
     outputs = _Reader(where, _merge(defaults["outputs"], top.sub("outputs").table), "outputs")
     outputs.check_keys(set(defaults["outputs"]))
     osc_text = outputs.string("osc")
@@ -460,11 +492,7 @@ def parse_session(user: Mapping[str, Any], *, where: str = "<session>",
     if video and Path(video).suffix.lower() not in (".mp4", ".mkv", ".gif", ".avi", ".webm"):
         raise outputs.fail("video", "a path ending in .mp4, .mkv, .gif, .avi or .webm", video)
 
-    return SessionConfig(
-        path=path, name=name, fps=fps, blend=blend, size=size, background=background,
-        background_colour=background_colour, chroma_key=chroma_key, takes=takes,
-        performers=tuple(performers), characters=tuple(characters), actions=tuple(actions),
-        outputs=config_outputs)
+    return config_outputs
 
 
 def resolve_source(spec: str, base: Path) -> str:

@@ -79,6 +79,8 @@ def test_preview_page_shows_follower_state_changing_in_chromium(tmp_path):
             match = re.search(r"^preview: (http://127\.0\.0\.1:\d+/)", line)
             url = match.group(1) if match else None
         assert url, "mop perform did not announce the preview page"
+        while not process.stderr.readline().startswith("the show is on"):
+            assert time.monotonic() < deadline + 60, "the show did not start"
         time.sleep(1.0)
         dumps = []
         for _ in range(3):

@@ -460,11 +460,9 @@ def test_a_machine_too_slow_for_the_rate_is_reported_plainly():
 
 
 def test_replay_mode_runs_faster_than_real_time_and_renders_every_frame():
-    import time
     session, recorder = standin_session("replay", delay=0.0)
-    start = time.monotonic()
     report = session.run(duration=4.0)
-    assert time.monotonic() - start < 4.0
+    assert report.wall_seconds < 4.0
     assert report.frames == 100 and report.rendered == 100 and report.dropped == 0
     assert [(index, repeat) for index, repeat, _ in recorder.written] == [
         (k, False) for k in range(100)]

@@ -50,8 +50,13 @@ class StillOutput:
 
     def __init__(self, path: Path, at: float, fps: int):
         self.path = Path(path)
+        self.at, self.fps = at, fps
         self.frame_number = int(round(at * fps))
         self.frames = 0
+
+    def recipe(self):
+        """Rebuilt where the pictures are made (the render process)."""
+        return (StillOutput, (self.path, self.at, self.fps), {})
 
     def write(self, frame, state, *, repeat: bool = False) -> None:
         if frame is not None and state is not None and state["frame"] == self.frame_number:

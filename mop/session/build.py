@@ -363,14 +363,11 @@ def _transparent(config: SessionConfig, overrides: Overrides) -> bool:
     return overrides.transparent or config.background is Background.TRANSPARENT
 
 
-VIDEO_SUFFIXES = (".mp4", ".mkv", ".avi", ".webm", ".gif")
-
-
 def _outputs(config: SessionConfig, overrides: Overrides) -> list:
     """Video and PNG writers (each in a thread of its own), OSC, the preview. PNG frames keep
     the alpha of a transparent stage; a video has none: it gets the session's colour behind the
     characters, or black when the file itself says transparent (a warning says so)."""
-    from .outputs import BackgroundOutput, OscOutput, PngOutput, VideoOutput
+    from .outputs import VIDEO_SUFFIXES, BackgroundOutput, OscOutput, PngOutput, VideoOutput
     outputs = []
     transparent = _transparent(config, overrides)
     pngs = [overrides.png or config.outputs.png]

@@ -303,9 +303,9 @@ class CharacterRuntime:
         self.tracks = list(tracks)
         self.targets: dict[str, np.ndarray] = {}
 
-    def warm_up(self, dt: float) -> None:
-        """Step the puppet on its rest targets and draw it once, then put it back at rest
-        (compiles what a first frame compiles; a puppet without reset() is not stepped)."""
+    def warm_up(self, dt: float, *, draw: bool = True) -> None:
+        """Step the puppet on its rest targets and (`draw`) draw it once, then put it back at
+        rest (compiles what a first frame compiles; a puppet without reset() is not stepped)."""
         reset = getattr(self.puppet, "reset", None)
         if reset is not None:
             rest: dict[str, Any] = {}
@@ -314,7 +314,7 @@ class CharacterRuntime:
             self.puppet.step(dt, rest)
             self.puppet.step(dt, {})
             reset()
-        if self.renderer is not None:
+        if draw and self.renderer is not None:
             self.renderer.render(self.puppet)
 
 
@@ -336,12 +336,15 @@ class Session:
     *, repeat: bool)` (called by the render worker, once per frame, in order; `repeat` when the
     frame's render was dropped and the previous picture stands in); both have `close()`.
     max_lag [s]: how far live mode may fall behind the wall clock before the session clock
-    slips (see the module docstring)."""
+    slips (see the module docstring); pictures: "process" (a render process, the default) or
+    "thread" (see `mop.session.worker`; renderers that cannot be rebuilt in a process are drawn
+    in a thread anyway)."""
 
     def __init__(self, performers: Sequence[PerformerRuntime],
                  characters: Sequence[CharacterRuntime], *, fps: int = 25,
                  mode: Mode | str = Mode.REPLAY, stage=None, outputs: Sequence = (),
-                 tail: float = 0.0, name: str = "session", max_lag: float = 0.5):
+                 tail: float = 0.0, name: str = "session", max_lag: float = 0.5,
+                 pictures: str = "process"):
         self.name = name
         self.performers = list(performers)
         self.characters = list(characters)
@@ -352,6 +355,9 @@ class Session:
         self.outputs = list(outputs)
         self.tail = float(tail)
         self.max_lag = float(max_lag)
+        if pictures not in ("process", "thread"):
+            raise ValueError(f"pictures must be 'process' or 'thread', got {pictures!r}")
+        self.pictures = pictures
         self.frame_index = 0
         self.t = 0.0
         self.clock = StageClock()
@@ -469,17 +475,17 @@ class Session:
             self.ended_at = self.t
         return self.t - self.ended_at >= self.tail
 
-    def warm_up(self) -> None:
-        """Before the clock starts: step every bank and puppet once and draw every character
-        (then put them back), so that nothing compiles or builds during the show."""
+    def warm_up(self, *, draw: bool = True) -> None:
+        """Before the clock starts: step every bank and puppet once and (`draw`) draw every
+        character, then put them back, so that nothing compiles or builds during the show."""
         if self._warm:
             return
         started = time.monotonic()
         for performer in self.performers:
             performer.warm_up()
         for character in self.characters:
-            character.warm_up(self.dt)
-        if self.stage is not None:
+            character.warm_up(self.dt, draw=draw)
+        if self.stage is not None and draw:
             self.stage.clear()
             for character in self.characters:
                 self.stage.place(character.renderer.render(character.puppet), character.position)
@@ -489,14 +495,19 @@ class Session:
     def run(self, *, duration: float | None = None, progress=None) -> SessionReport:
         """Run until the inputs end, `duration` [s] of session time passes, or Ctrl-C; the
         outputs are closed in every case. `progress(session)` is called once per frame."""
-        from .worker import RenderWorker
         try:
-            self.warm_up()
-            if self.stage is not None and self._frame_outputs:
-                self.worker = RenderWorker(self.stage, self.characters, self._frame_outputs,
-                                           lossless=self.mode is Mode.REPLAY, clock=self.clock)
+            preparing = time.monotonic()
+            self.worker = self._make_worker()
+            if self.worker is None or not self.worker.separate:
+                self.warm_up()
+                if self.worker is not None:
+                    self.worker.start()
+            else:                     # the render process builds while this one warms up
                 self.worker.start()
+                self.warm_up(draw=False)
+                self.worker.wait_ready()
             self.wall_start = time.monotonic()
+            self.warmup_seconds = self.wall_start - preparing
             if self.mode is Mode.REPLAY:
                 while not self.finished and (duration is None or self.t < duration):
                     self.step()
@@ -508,6 +519,20 @@ class Session:
             self.wall_seconds = time.monotonic() - (self.wall_start or time.monotonic())
             self.close()
         return self.report()
+
+    def _make_worker(self):
+        """The render worker for this run, or None when there are no pictures to make."""
+        if self.stage is None or not self._frame_outputs:
+            return None
+        from .worker import NotPortable, RenderProcess, RenderWorker
+        options = dict(lossless=self.mode is Mode.REPLAY, clock=self.clock)
+        if self.pictures == "process":
+            try:
+                return RenderProcess(self.stage, self.characters, self._frame_outputs,
+                                     **options)
+            except NotPortable as why:
+                log.info("%s; the pictures are drawn in a thread", why)
+        return RenderWorker(self.stage, self.characters, self._frame_outputs, **options)
 
     def _run_live(self, duration, progress) -> None:
         period = self.dt

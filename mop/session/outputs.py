@@ -19,22 +19,49 @@ import numpy as np
 log = logging.getLogger(__name__)
 
 
+VIDEO_SUFFIXES = (".mp4", ".mkv", ".avi", ".webm", ".gif")
+
+
+def _dropped(path: Path) -> bool:
+    """os.devnull: `mop.export.open_writer` counts the frames and drops them."""
+    return path.exists() and os.path.exists(os.devnull) and os.path.samefile(path, os.devnull)
+
+
 class VideoOutput:
-    """MP4 / MKV / GIF / AVI / WebM through `mop.export.open_writer`.
+    """MP4 / MKV / GIF / AVI / WebM through `mop.export.open_writer`, opened by `open()` (or the
+    first write) where the pictures are made: in the render process, usually (`recipe()`).
 
     background : (r, g, b) drawn under transparent pixels (video has no alpha)."""
 
     def __init__(self, path: str | Path, *, fps: int, size: tuple[int, int],
-                 background: tuple[int, int, int] = (0, 0, 0)):
-        from mop.export import open_writer
+                 background: tuple[int, int, int] | None = (0, 0, 0)):
         self.path = Path(path)
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        self.writer = open_writer(self.path, fps=fps, size=tuple(size), background=background)
+        self.options = dict(fps=fps, size=tuple(size), background=background)
+        self.writer = None
         self.frames = 0
+        self._check()
+
+    def _check(self) -> None:
+        """What can be said before the writer opens (in the render process, usually)."""
+        if _dropped(self.path):
+            return
+        if self.path.suffix.lower() not in VIDEO_SUFFIXES:
+            raise ValueError(f"{self.path}: expected a video file ending in "
+                             f"{', '.join(VIDEO_SUFFIXES)}")
+
+    def recipe(self):
+        return (type(self), (self.path,), self.options)
+
+    def open(self) -> None:
+        if self.writer is None:
+            from mop.export import open_writer
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            self.writer = open_writer(self.path, **self.options)
 
     def write(self, frame, state, *, repeat: bool = False) -> None:
         if frame is None:
             return
+        self.open()
         self.writer.write(frame)
         self.frames += 1
 
@@ -52,12 +79,20 @@ class PngOutput(VideoOutput):
 
     def __init__(self, folder: str | Path, *, fps: int, size: tuple[int, int],
                  background: tuple[int, int, int] | None = None):
-        from mop.export import open_writer
         self.folder = Path(folder)
-        self.writer = open_writer(self.folder, fps=fps, size=tuple(size), background=background)
-        self.frames = 0
+        super().__init__(folder, fps=fps, size=size, background=background)
+
+    def _check(self) -> None:
+        if self.path.exists() and not self.path.is_dir() and not _dropped(self.path):
+            raise ValueError(f"{self.path}: expected a folder for the PNG frames")
+
+    def open(self) -> None:
+        if self.writer is None:
+            from mop.export import open_writer
+            self.writer = open_writer(self.folder, **self.options)
 
     def write(self, frame, state, *, repeat: bool = False) -> None:
+        self.open()
         writer = self.writer
         if not repeat or writer.frames_written == 0:
             super().write(frame, state)
@@ -156,21 +191,39 @@ class BackgroundOutput:
         import queue
         import threading
         self.inner = inner
+        self.queue_size = queue_size
         self.queue: queue.Queue = queue.Queue(maxsize=queue_size)
         self.free: queue.Queue = queue.Queue()
-        self.buffers = queue_size + 2
         self.error: BaseException | None = None
         self._last = None
         self._held: dict[int, int] = {}        # buffer id -> queued writes still reading it
         self._lock = threading.Lock()
-        self.thread = threading.Thread(target=self._work, name=f"mop-{type(inner).__name__}",
-                                       daemon=True)
-        self.thread.start()
+        self.thread = None
         self.closed = False
+
+    def recipe(self):
+        """Rebuilt around the inner output's recipe (None when the inner has none)."""
+        inner = getattr(self.inner, "recipe", None)
+        inner = None if inner is None else inner()
+        return None if inner is None else (_in_background, (inner, self.queue_size), {})
+
+    def open(self) -> None:
+        import threading
+        opener = getattr(self.inner, "open", None)
+        if opener is not None:
+            opener()
+        if self.thread is None:
+            self.thread = threading.Thread(target=self._work,
+                                           name=f"mop-{type(self.inner).__name__}", daemon=True)
+            self.thread.start()
 
     @property
     def frames(self) -> int:
         return self.inner.frames
+
+    @frames.setter
+    def frames(self, count: int) -> None:
+        self.inner.frames = count
 
     @property
     def path(self):
@@ -224,14 +277,23 @@ class BackgroundOutput:
     def write(self, frame, state, *, repeat: bool = False) -> None:
         if self.error is not None:
             raise self.error
+        if self.thread is None:
+            self.open()
         self.queue.put((None if frame is None else self._copy(frame, repeat), state, repeat))
 
     def close(self) -> None:
         if self.closed:
             return
         self.closed = True
-        self.queue.put(None)
-        self.thread.join()
+        if self.thread is not None:
+            self.queue.put(None)
+            self.thread.join()
         self.inner.close()
         if self.error is not None:
             raise self.error
+
+
+def _in_background(recipe, queue_size: int) -> BackgroundOutput:
+    """A BackgroundOutput around the output `recipe` builds (in the render process)."""
+    factory, args, kwargs = recipe
+    return BackgroundOutput(factory(*args, **kwargs), queue_size=queue_size)

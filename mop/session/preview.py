@@ -10,8 +10,9 @@ follower state and the session's timing.
 
 It binds 127.0.0.1 by default: the page is for the people in the room, not the network.
 Viewers can never slow the show: the loop only hands over a reference to its state each frame
-(`send`), and the render worker encodes a JPEG at most `max_rate` times a second (`write`);
-the server's threads only serve bytes made once, whatever the number of viewers. The server
+(`send`), and the render worker encodes a JPEG at most `max_rate` times a second (`JpegEncoder`,
+its bytes come to `publish`); the server's threads only serve bytes made once, whatever the
+number of viewers. The server
 itself is bounded: at most `max_connections` connections at a time (more are closed at once),
 `timeout` seconds for a silent or stuck client, and request counts only for its own pages.
 """
@@ -94,6 +95,48 @@ class _BoundedServer(ThreadingHTTPServer):
                 self.active -= 1
 
 
+class JpegEncoder:
+    """A frame output that makes the preview's JPEG: at most `max_rate` pictures a second, each
+    handed to `publish(frame number, JPEG bytes)` (`connect`). It runs where the pictures are
+    made - the render process, usually - so viewers cost the session nothing."""
+
+    def __init__(self, *, max_rate: float = 12.0, jpeg_quality: int = 80):
+        self.max_rate = max_rate
+        self.jpeg_quality = jpeg_quality
+        self.publish = None
+        self._last = -math.inf
+        self._rgb: np.ndarray | None = None
+        self._bgr: np.ndarray | None = None
+
+    def connect(self, publish) -> None:
+        self.publish = publish
+
+    def write(self, frame, state, *, repeat: bool = False) -> None:
+        now = time.monotonic()
+        if frame is None or repeat or now - self._last < 1.0 / self.max_rate:
+            return
+        self._last = now
+        self.publish(int(state["frame"]), self.encode(frame))
+
+    def encode(self, frame: np.ndarray) -> bytes:
+        """JPEG of an RGBA frame; transparent parts over dark grey."""
+        import cv2
+
+        from mop.export import over_colour
+        if self._rgb is None or self._rgb.shape[:2] != frame.shape[:2]:
+            self._rgb = np.empty(frame.shape[:2] + (3,), np.uint8)
+            self._bgr = np.empty_like(self._rgb)
+        over_colour(frame, (40, 40, 40), out=self._rgb)
+        bgr = cv2.cvtColor(self._rgb, cv2.COLOR_RGB2BGR, dst=self._bgr)
+        ok, data = cv2.imencode(".jpg", bgr, [cv2.IMWRITE_JPEG_QUALITY, self.jpeg_quality])
+        if not ok:
+            raise RuntimeError("JPEG encoding of the preview frame failed")
+        return data.tobytes()
+
+    def close(self) -> None:
+        pass
+
+
 class PreviewOutput:
     """Serve the preview page on http://host:port/ (port 0 = any free port; see `.url`)."""
 
@@ -108,9 +151,7 @@ class PreviewOutput:
         self._jpeg: tuple[int, bytes] | None = None
         self._state: dict = {"frame": 0, "performers": {}, "characters": {}}
         self._state_json: tuple[int, float, bytes] | None = None
-        self._last_encoded = -math.inf
-        self._rgb: np.ndarray | None = None
-        self._bgr: np.ndarray | None = None
+        self._encoder: JpegEncoder | None = None
         self.requests: dict[str, int] = {}
         self.frames = 0
         self.closed = False
@@ -129,32 +170,26 @@ class PreviewOutput:
     def send(self, state: dict) -> None:
         self._state = state          # one reference: the loop never waits here
 
-    # called by the render worker, once per frame ---------------------------------------------
+    # the pictures: drawn and encoded by the render worker -----------------------------------
+    def recipe(self):
+        """The JPEG encoder, rebuilt in the render process; what it makes comes back to
+        `publish`."""
+        return (JpegEncoder, (), {"max_rate": self.max_rate,
+                                  "jpeg_quality": self.jpeg_quality})
+
     def write(self, frame, state, *, repeat: bool = False) -> None:
-        now = time.monotonic()
-        if frame is None or repeat or now - self._last_encoded < 1.0 / self.max_rate:
-            return
-        self._last_encoded = now
-        encoded = (int(state["frame"]) if state else self.frames, self._encode(frame))
+        """Encode here (a render thread, when the pictures are not made in a process)."""
+        if self._encoder is None:
+            self._encoder = JpegEncoder(max_rate=self.max_rate, jpeg_quality=self.jpeg_quality)
+            self._encoder.connect(self.publish)
+        self._encoder.write(frame, state, repeat=repeat)
+
+    def publish(self, number: int, data: bytes) -> None:
+        """The newest JPEG (frame number, bytes): what /frame.jpg and /stream.mjpg serve."""
         self.frames += 1
         with self._lock:
-            self._jpeg = encoded
+            self._jpeg = (number, data)
             self._changed.notify_all()
-
-    def _encode(self, frame: np.ndarray) -> bytes:
-        """JPEG of an RGBA frame; transparent parts over dark grey."""
-        import cv2
-
-        from mop.export import over_colour
-        if self._rgb is None or self._rgb.shape[:2] != frame.shape[:2]:
-            self._rgb = np.empty(frame.shape[:2] + (3,), np.uint8)
-            self._bgr = np.empty_like(self._rgb)
-        over_colour(frame, (40, 40, 40), out=self._rgb)
-        bgr = cv2.cvtColor(self._rgb, cv2.COLOR_RGB2BGR, dst=self._bgr)
-        ok, data = cv2.imencode(".jpg", bgr, [cv2.IMWRITE_JPEG_QUALITY, self.jpeg_quality])
-        if not ok:
-            raise RuntimeError("JPEG encoding of the preview frame failed")
-        return data.tobytes()
 
     def close(self) -> None:
         if self.closed:

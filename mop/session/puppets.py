@@ -193,6 +193,14 @@ class SceneLayer:
         else:
             look = "latex"
         self.scene.add(puppet, look=look)
+        self._options = dict(height=height, colour=colour, camera=camera)
+        self._shape = puppet
+
+    def recipe(self):
+        """How to build this layer again in a render process: the puppet's mesh at rest and the
+        same options (the GL context itself cannot travel)."""
+        from .worker import MeshShape
+        return (SceneLayer, (MeshShape(self._shape),), self._options)
 
     def render(self, puppet) -> np.ndarray:
         # the vertices of the puppet handed in: a session's render worker hands a frozen copy

@@ -4,8 +4,8 @@ A ``BankModel`` (built once, see ``followers.bank_model``) and a ``BankState`` (
 frame) sit beside the followers' ``ForwardModel`` / ``ForwardState``. One frame
 (``bank_step``): the followers (``_kernels.forward_step``), the outline models
 (``outline_step``), then the decision in stages: ``_evidence`` (the posterior's running
-evidence), ``_fits`` (the rejection's fit against the background model), ``_pace`` (an
-optional term of the fit), ``_posterior``, ``_decide`` (rejection and switch hysteresis);
+evidence), ``_fits`` (the rejection's fit against the background model), ``_posterior``,
+``_decide`` (rejection and switch hysteresis);
 then the recognition mixture's weight is learned (``learn_mixture``) and the shown action's
 follower gets its own restart rate (``gate``).
 
@@ -115,31 +115,6 @@ def progress_of_all(fmodel, fstate, bstate):
 
 
 @inline
-def _pace(fmodel, fstate, bmodel, bstate):
-    """The forgetful mean of each follower's forward advance per frame [states per frame]:
-    a hesitation is no evidence of advancing; a follower that reached ``end_fraction`` of its
-    template is not judged for as many frames as the template is long (holding the end pose
-    is not being stuck); a new repetition is judged afresh; never below ``pace_floor``."""
-    lengths, reference = fmodel.lengths, bmodel.pace_reference
-    for k in range(lengths.shape[0]):
-        position = bstate.progress[k] * (lengths[k] - 1)
-        step = max(position - bstate.last_position[k], 0.0)
-        restarted = fstate.main[k] != bstate.last_main[k]
-        bstate.last_main[k] = fstate.main[k]
-        if bstate.progress[k] >= bmodel.end_fraction:
-            bstate.since_end[k] = 0.0
-        else:
-            bstate.since_end[k] += 1.0
-        if bstate.since_end[k] <= lengths[k]:
-            step = reference
-        bstate.last_position[k] = position
-        if restarted:
-            bstate.pace[k] = reference
-        pace = bmodel.pace_decay * bstate.pace[k] + (1.0 - bmodel.pace_decay) * step
-        bstate.pace[k] = max(pace, bmodel.pace_floor)
-
-
-@inline
 def _evidence(fstate, bmodel, bstate):
     """Each action's frame score (recognition log-likelihood plus ``outline_weight`` times the
     outline model's) relative to the frame's best, at most ``evidence_cap`` against it, added
@@ -166,8 +141,8 @@ def _fits(fstate, bmodel, bstate, n_obs, cap, outlier):
     ratio against the background model per observed channel [nats per channel per frame],
     each frame counting at least ``fit_floor``; a frame counts as the better of the follower's
     score and its outline model's less ``outline_fit_margin`` per channel (an irregular
-    repetition its follower loses track of is still the action); minus the pace term. A frame
-    with an ``outlier`` channel counts ``fit_floor`` for every action."""
+    repetition its follower loses track of is still the action). A frame with an ``outlier``
+    channel counts ``fit_floor`` for every action."""
     background = 0.0
     if not outlier:
         background = capped_log_density(fstate.xs, fstate.observed, bmodel.background_mean,
@@ -181,13 +156,7 @@ def _fits(fstate, bmodel, bstate, n_obs, cap, outlier):
             explained = max(fstate.frame_loglik[1, k],
                             bstate.outline_ll[k] - bmodel.outline_fit_margin * n_obs)
             per_channel = max((explained - background) / n_obs, bmodel.fit_floor)
-        mean = bstate.likelihood_fit[k]
-        bstate.likelihood_fit[k] = mean + (per_channel - mean) * inv_w
-        penalty = 0.0
-        if bmodel.pace_weight > 0.0:
-            penalty = min(bmodel.pace_weight * math.log(bstate.pace[k] / bmodel.pace_reference),
-                          0.0)
-        bstate.fit[k] = bstate.likelihood_fit[k] + penalty
+        bstate.fit[k] += (per_channel - bstate.fit[k]) * inv_w
 
 
 @inline
@@ -272,8 +241,6 @@ def decide(fmodel, fstate, bmodel, bstate, n_obs):
     if outlier:
         bstate.outlier_frames[0] += 1
     if n_obs > 0:
-        if bmodel.pace_weight > 0.0:
-            _pace(fmodel, fstate, bmodel, bstate)
         leading = _evidence(fstate, bmodel, bstate)
         _fits(fstate, bmodel, bstate, n_obs, fmodel.cap, outlier)
         _bound_lead(bmodel, bstate, leading)

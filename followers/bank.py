@@ -346,7 +346,7 @@ class FollowerBank:
     @property
     def fits(self) -> np.ndarray:
         """(K,) float: each action's recent log-likelihood ratio against the background model
-        [nats per channel per frame] (less the pace term when ``pace_weight > 0``)."""
+        [nats per channel per frame]."""
         return self._bank.fit
 
     # ---- running --------------------------------------------------------------------------------

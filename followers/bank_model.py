@@ -50,10 +50,6 @@ class BankModel(NamedTuple):
     enter_margin: float
     leave_margin: float
     switch_margin: float
-    pace_weight: float
-    pace_decay: float
-    pace_reference: float            # [states per frame]
-    pace_floor: float                # [states per frame]
     learn_mixture: bool              # learn the exact component's weight (a mixture exists)
     mixture_start: float             # its weight at each reset (0: no mixture)
     mixture_prior: float             # [frames]
@@ -75,12 +71,7 @@ class BankState(NamedTuple):
     outline_fresh: np.ndarray    # (1,) bool: no frame yet
     recent: np.ndarray           # (K,) <= 0: the posterior's evidence, the leader at 0
     fit: np.ndarray              # (K,): the rejection's fit [nats per channel per frame]
-    likelihood_fit: np.ndarray   # (K,): the fit before the pace term
     fit_weight: np.ndarray       # (1,): the fit's forgetful count
-    pace: np.ndarray             # (K,): forgetful mean advance [states per frame]
-    last_position: np.ndarray    # (K,): main-track position last frame [states]
-    since_end: np.ndarray        # (K,): frames since progress last reached end_fraction
-    last_main: np.ndarray        # (K,) int64: main track last frame
     posterior: np.ndarray        # (K,): over actions
     progress: np.ndarray         # (K,): each follower's main-track progress [0, 1]
     variance: np.ndarray         # (K,): its variance [progress units squared]
@@ -214,7 +205,6 @@ def build_bank_model(actions: list, config: BankConfig, *, resolution: int,
     rejecting = math.isfinite(c.reject_margin)
     hysteresis = c.reject_hysteresis if rejecting else 0.0
     idle = max(restart)
-    pace_reference = c.pace_reference * resolution
     return BankModel(
         outline_mean=outline_mean, outline_inv_var=1.0 / variance,
         outline_log_norm=-0.5 * np.log(2.0 * np.pi * variance),
@@ -227,9 +217,7 @@ def build_bank_model(actions: list, config: BankConfig, *, resolution: int,
         decay=math.exp(-1.0 / c.memory), fit_decay=math.exp(-1.0 / c.fit_memory),
         evidence_cap=c.evidence_cap, lead_cap=c.lead_cap, lead_cap_at_end=c.lead_cap_at_end,
         end_fraction=c.end_fraction, fit_floor=c.fit_floor, enter_margin=hysteresis,
-        leave_margin=hysteresis, switch_margin=c.switch_margin, pace_weight=c.pace_weight,
-        pace_decay=math.exp(-1.0 / c.pace_memory), pace_reference=pace_reference,
-        pace_floor=c.pace_floor * pace_reference,
+        leave_margin=hysteresis, switch_margin=c.switch_margin,
         learn_mixture=mixture > 0.0 and c.learn_mixture, mixture_start=mixture,
         mixture_prior=c.mixture_prior, mixture_decay=math.exp(-1.0 / c.mixture_memory),
         mixture_lowest=min(c.mixture_lowest, mixture),
@@ -243,9 +231,8 @@ def bank_state(model: BankModel) -> BankState:
     return BankState(
         outline_alpha=np.zeros((K, S)), outline_scratch=np.zeros(S), outline_ll=np.zeros(K),
         outline_total=np.zeros(K), outline_fresh=np.ones(1, dtype=np.bool_),
-        recent=np.zeros(K), fit=np.zeros(K), likelihood_fit=np.zeros(K), fit_weight=np.zeros(1),
-        pace=np.zeros(K), last_position=np.zeros(K), since_end=np.zeros(K),
-        last_main=np.zeros(K, dtype=np.int64), posterior=np.zeros(K), progress=np.zeros(K),
+        recent=np.zeros(K), fit=np.zeros(K), fit_weight=np.zeros(1), posterior=np.zeros(K),
+        progress=np.zeros(K),
         variance=np.zeros(K), decision=np.zeros(4, dtype=np.int64), mixture_state=np.zeros(2),
         gated=np.zeros(1, dtype=np.int64), outlier_frames=np.zeros(1, dtype=np.int64))
 
@@ -258,12 +245,8 @@ def reset_bank(model: BankModel, state: BankState) -> None:
     state.outline_ll[:] = 0.0
     state.outline_total[:] = 0.0
     state.outline_fresh[:] = True
-    for name in ("recent", "fit", "likelihood_fit", "fit_weight", "last_position", "progress",
-                 "variance"):
+    for name in ("recent", "fit", "fit_weight", "progress", "variance"):
         getattr(state, name)[:] = 0.0
-    state.pace[:] = model.pace_reference
-    state.since_end[:] = np.inf
-    state.last_main[:] = 0
     state.posterior[:] = 1.0 / K
     state.decision[:] = (-1, 0, 0, 0)
     state.outlier_frames[:] = 0

@@ -245,14 +245,6 @@ class BankConfig(_Config):
                            low_open=True)
     fit_floor: float = _f(-1.0, "nats per channel", "one frame counts at most this low in the "
                           "fit")
-    pace_weight: float = _f(0.0, "nats per channel per frame", "weight of the rejection's "
-                            "progress-plausibility term (0: off)", low=0.0)
-    pace_memory: float = _f(10.0, "frames", "time constant of a follower's measured advance",
-                            low=0.0, low_open=True)
-    pace_reference: float = _f(0.5, "template frames per frame", "advance below which the pace "
-                               "term costs", low=0.0, low_open=True)
-    pace_floor: float = _f(0.2, "x pace_reference", "the measured advance never falls below",
-                           low=0.0, high=1.0, low_open=True)
     active_restart: float = _f(1e-4, "probability per frame", "the shown action's follower "
                                "begins a new repetition from anywhere (the others: the chain's "
                                "restart)", low=0.0, high=1.0, high_open=True)

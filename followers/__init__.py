@@ -14,7 +14,9 @@ __getattr__, __dir__, __all__ = lazy_loader.attach(__name__, submod_attrs={
     # every tuning number
     "config": ["FollowerConfig", "BankConfig"],
     # the bank of one performer
-    "bank": ["FollowerBank", "BankOutput", "BankTrace"],
+    "bank": ["FollowerBank"],
+    # what a bank says, per frame and over a take
+    "bank_output": ["BankOutput", "BankTrace"],
     # preparing demonstrations (MOP 3.1.3)
     "preprocessing": ["ChannelNormaliser", "fit_normaliser", "normalise", "align", "resample",
                       "fill_gaps", "time_warp"],

@@ -272,7 +272,7 @@ def bank_step(fmodel, fstate, bmodel, bstate, x):
 @kernel
 def bank_run(fmodel, fstate, bmodel, bstate, X, trace):
     """``bank_step`` over the rows of ``X (N, D)``, what it said into ``trace`` (a
-    ``bank.BankTrace`` of (N,) and (N, K) arrays)."""
+    ``bank_output.BankTrace`` of (N,) and (N, K) arrays)."""
     for n in range(X.shape[0]):
         shown = bank_step(fmodel, fstate, bmodel, bstate, X[n])
         trace.action[n] = bstate.decision[0]

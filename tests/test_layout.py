@@ -37,7 +37,7 @@ LAYERS = {
     ],
     "followers": [
         ["followers._jit", "followers._cells", "followers._kernels", "followers._bank_kernels",
-         "followers._baum_welch",
+         "followers._baum_welch", "followers.bank_output",
          "followers.config", "followers.defaults", "followers.preprocessing",
          "followers.transitions", "followers.datasets", "followers.model",
          "followers.still", "followers.intervals"],

@@ -306,6 +306,21 @@ def bench_accuracy(seeds: range) -> None:
                   f"min {values.min():.4f}  >= {target}: {(values >= target).sum()} of "
                   f"{len(values)}")
     print(f"  drawings: details inside the puppet {details_inside[0]} of {details_inside[1]}")
+    other = []
+    for name in kit.OTHER_PHOTOS:
+        photo = kit.photo(name)
+        for seed in range(100, 103):
+            rng = np.random.default_rng(seed)
+            for _, truth in kit.silhouettes(rng, *photo.shape[:2]):
+                picture = kit.photo_on_background(
+                    rng, photo, truth, colour=kit.backdrop_colour(rng),
+                    gradient=rng.uniform(0.25, 0.5), noise=rng.uniform(3, 8),
+                    quality=int(rng.integers(65, 81)))
+                other.append(kit.iou(remove_background(picture).mask, truth))
+    other = np.array(other)
+    print(f"  photos   other    n={len(other):3d}  IoU mean {other.mean():.4f}  min "
+          f"{other.min():.4f}  >= 0.95: {(other >= 0.95).sum()} of {len(other)} "
+          f"({len(kit.OTHER_PHOTOS)} more pictures, seeds 100-102)")
     worst = {"star": 0.0, "stick figure": 0.0}
     for seed in seeds:
         rng = np.random.default_rng(seed)

@@ -23,6 +23,9 @@ TUNING_OUTLINES = ("blob", "star", "pear", "ghost")
 # ... and are checked on these as well, which were not used for choosing
 HELD_OUT_PHOTOS = ("astronaut", "coffee", "chelsea")
 HELD_OUT_OUTLINES = ("bear", "fish")
+# more photographs, of other kinds (greyscale, microscopy, textures), checked only
+OTHER_PHOTOS = ("camera", "immunohistochemistry", "moon", "coins", "clock", "hubble_deep_field",
+                "retina", "cell", "brick", "grass", "gravel")
 INK_NAMES = ("black", "blue", "red", "green", "brown", "violet")
 
 
@@ -38,7 +41,10 @@ def photo(name: str) -> np.ndarray:
         from skimage import data
         return np.ascontiguousarray(data.stereo_motorcycle()[0])
     from skimage import data
-    return np.ascontiguousarray(getattr(data, name)()[:, :, :3])
+    picture = getattr(data, name)()
+    if picture.ndim == 2:
+        picture = np.repeat(picture[:, :, None], 3, axis=2)
+    return np.ascontiguousarray(picture[:, :, :3]).astype(np.uint8)
 
 
 def _cv2():

@@ -176,8 +176,9 @@ class PerformerRuntime:
             self.seen.add(out.action)
 
     def _stopped(self, out) -> bool:
-        """True when the bank has shown the same action over the still window and its
-        progress moved less than STILL_PROGRESS: the performer stopped (or holds the end)."""
+        """True when the bank has shown one action over the still window (or no action on
+        some of its frames: the bank's own still stage) and the progress moved less than
+        STILL_PROGRESS: the performer stopped (or holds the end)."""
         window = self._recent_progress.size
         if window == 0:
             return False
@@ -187,7 +188,8 @@ class PerformerRuntime:
         if self.steps < window or out.action is None:
             return False
         actions, progress = self._recent_action, self._recent_progress
-        return bool(actions.min() == actions.max()
+        shown = actions.max()
+        return bool(np.all((actions == shown) | (actions < 0))
                     and progress.max() - progress.min() < STILL_PROGRESS)
 
     def posterior(self) -> dict[str, float]:

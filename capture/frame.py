@@ -13,10 +13,13 @@ import numpy as np
 class Status(str, Enum):
     """Health of a source, as seen by the one reading it.
 
-    OK: frames are arriving. STALLED: the device is open but nothing arrived for longer than the
-    source's `stall_timeout`. DISCONNECTED: the device is gone (unplugged, port lost, file or take
-    ended); a live source keeps trying to reconnect."""
+    OK: frames are arriving. NOT_SEEN: frames are arriving but a camera's tracker does not find
+    what it tracks (no face, no hand in the picture): the values are NaN. STALLED: the device is
+    open but nothing arrived for longer than the source's `stall_timeout`. DISCONNECTED: the
+    device is gone (unplugged, port lost, file or take ended); a live source keeps trying to
+    reconnect."""
     OK = "ok"
+    NOT_SEEN = "not seen"
     STALLED = "stalled"
     DISCONNECTED = "disconnected"
 

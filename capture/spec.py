@@ -2,7 +2,8 @@
 
     hid:PROFILE[@DEVICE]           hid:p5, hid:spacemouse, hid:generic@/dev/hidraw3,
                                    hid:dualshock4@054c:09cc, hid:path/to/profile.toml
-    camera:DEVICE[:TRACKER]        camera:0:aruco, camera:clip.mkv:color, camera:1:face
+    camera:DEVICE[:TRACKER]        camera:0:face, camera:0:hands, camera:0:pose,
+                                   camera:0:aruco, camera:clip.mkv:color
     osc:[HOST][:PORT][/ADDRESS]    osc:127.0.0.1:9000/glove, osc: (Wekinator: 127.0.0.1:6448
                                    /wek/inputs), osc:0.0.0.0:9000/glove (other machines)
     replay:PATH                    replay:recordings/NAME (the .sqlite suffix may be left out)
@@ -22,7 +23,8 @@ from .source import Resampled, Source
 KINDS = ("hid", "camera", "osc", "replay")
 _SOURCE_OPTIONS = {"stall_timeout", "reconnect_interval", "reconnect", "queue_size",
                    "backpressure", "wait"}
-_CAMERA_OPTIONS = _SOURCE_OPTIONS | {"realtime", "loop", "width", "height", "fps"}
+_CAMERA_OPTIONS = _SOURCE_OPTIONS | {"realtime", "loop", "width", "height", "fps", "smooth",
+                                     "smooth_cutoff", "smooth_beta"}
 
 
 def _value(text: str) -> Any:
@@ -77,14 +79,14 @@ def _hid(body: str, options: dict, spec: str) -> Source:
 
 def _camera(body: str, options: dict, spec: str) -> Source:
     from .camera.source import CameraSource
-    from .camera.trackers import TRACKERS
+    from .camera.trackers import TRACKERS, tracker_names
     device, tracker = body, "color"
     head, sep, tail = body.rpartition(":")
     if sep and tail in TRACKERS:
         device, tracker = head, tail
     elif sep and head and tail and not tail.isdigit():
         raise ValueError(f"{spec!r}: unknown tracker {tail!r}; available: "
-                         f"{', '.join(sorted(set(TRACKERS) - {'colour'}))}")
+                         f"{', '.join(tracker_names())}")
     if not device:
         raise ValueError(f"{spec!r}: name a camera index or a video file, e.g. camera:0:aruco")
     source_options = {k: v for k, v in options.items() if k in _CAMERA_OPTIONS}

@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Installs everything mop needs on a fresh Debian 12 / Python 3.11 machine, into ./.venv.
-#   bash scripts/setup.sh          the application (demo, capture, rendering)
+#   bash scripts/setup.sh          the application (demo, capture with the face, hands and pose
+#                                  trackers, rendering)
 #   bash scripts/setup.sh --test   also what the test suite needs (umockdev, Chromium, test data)
 # System libraries come from apt-get (as root, or through sudo); Python packages from pip.
 set -euo pipefail
@@ -36,4 +37,8 @@ extras="all"
 [ "$want_tests" = 1 ] && extras="dev"
 .venv/bin/python -m pip install -q --upgrade pip
 .venv/bin/python -m pip install -q -e ".[$extras]"
+# mop[vision]'s MediaPipe names the GUI OpenCV, which shares the cv2/ folder with the headless
+# one: put the headless files back (same version, no GUI libraries needed)
+headless=$(.venv/bin/python -m pip show opencv-contrib-python-headless | sed -n 's/^Version: //p')
+.venv/bin/python -m pip install -q --force-reinstall --no-deps "opencv-contrib-python-headless==$headless"
 echo "setup: done (.venv/bin/mop is the command)"

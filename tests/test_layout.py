@@ -30,7 +30,8 @@ LAYERS = {
     "capture": [
         ["capture.frame", "capture.clock", "capture.resample", "capture.store",
          "capture.profiles", "capture.hid.parse", "capture.hid.profile", "capture.hid.status",
-         "capture.hid.calibration", "capture.camera.trackers"],
+         "capture.hid.calibration", "capture.camera.base", "capture.camera.landmarks",
+         "capture.camera.smoothing", "capture.camera.markerless", "capture.camera.trackers"],
         ["capture.source"],
         ["capture.osc", "capture.replay", "capture.hid.source", "capture.camera.source"],
         ["capture.spec", "capture.devices"],

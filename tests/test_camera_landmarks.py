@@ -190,6 +190,24 @@ def test_hand_channels_share_the_glove_profiles_finger_names():
     assert lm.HAND_CHANNELS[:5] == lm.FINGERS
 
 
+def test_hands_keep_their_sides():
+    from capture.camera.markerless import assign_sides
+    nobody = {"right": None, "left": None}
+    assert assign_sides([], nobody) == []
+    assert assign_sides([("left", 0.95, (0.7, 0.5)), ("right", 0.9, (0.3, 0.5))],
+                        nobody) == ["left", "right"]
+    # both called right: the surer keeps it
+    assert assign_sides([("right", 0.6, (0.7, 0.5)), ("right", 0.9, (0.3, 0.5))],
+                        nobody) == ["left", "right"]
+    # a lone hand, unsure, where the left hand was a frame ago: still the left hand
+    last = {"right": None, "left": (0.72, 0.5)}
+    assert assign_sides([("right", 0.6, (0.7, 0.52))], last) == ["left"]
+    # ... but sure of itself, or far from where the left one was, it is what it says
+    assert assign_sides([("right", 0.95, (0.7, 0.52))], last) == ["right"]
+    last = {"right": (0.3, 0.5), "left": (0.72, 0.5)}
+    assert assign_sides([("right", 0.6, (0.32, 0.5))], last) == ["right"]
+
+
 # -- pose ------------------------------------------------------------------------------------
 
 def synthetic_body(*, raise_left=30.0, elbow_left=45.0, wrist_left=20.0, raise_right=90.0,

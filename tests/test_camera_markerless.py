@@ -7,29 +7,45 @@ source: scikit-image's astronaut and matplotlib's Grace Hopper, each a face and 
   known scale;
 - the lower face warped open: jaw_open rises step by step;
 - the face covered, then no one there: NaN and status "not seen", then found again;
-- the body rotated: the pose tracker's lean follows; no hand in either picture: NaN.
+- the body rotated: the pose tracker's lean follows; no hand in either picture: NaN;
+- One Euro smoothing on a noisy picture; `mop record` from a camera; the demo's glove performer
+  given `camera:...:hands`; the shipped webcam session's takes followed.
 """
+import importlib.util
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 cv2 = pytest.importorskip("cv2")
 pytest.importorskip("mediapipe", reason="the markerless trackers need mop[vision]")
-skimage_data = pytest.importorskip("skimage.data")
+pytest.importorskip("skimage.data", reason="the astronaut photograph comes with scikit-image")
 
 from capture import Status, open_source  # noqa: E402
 from capture.camera.landmarks import (FACE_CHANNELS, HAND_CHANNELS,  # noqa: E402
                                       POSE_CHANNELS)
 
-pytestmark = pytest.mark.realdata
+pytestmark = [pytest.mark.realdata, pytest.mark.slow]   # videos through MediaPipe: minutes
 
+ROOT = Path(__file__).resolve().parent.parent
 W, H = 640, 480
 FACE = {name: k for k, name in enumerate(FACE_CHANNELS)}
 
 
-def astronaut():
-    return np.ascontiguousarray(skimage_data.astronaut()[..., ::-1])     # RGB -> BGR
+def _load_pictures():
+    """The picture making of the webcam example's takes (recordings/make_webcam_takes.py):
+    the photo's placement, the jaw warp, lossless video writing."""
+    path = ROOT / "recordings" / "make_webcam_takes.py"
+    spec = importlib.util.spec_from_file_location("make_webcam_takes", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+pictures = _load_pictures()
+astronaut, placement, place = pictures.astronaut, pictures.placement, pictures.place
+write_video, face_points, jaw_warp = pictures.write_video, pictures.face_points, pictures.jaw_warp
 
 
 def grace_hopper():
@@ -47,28 +63,9 @@ def photo(request):
     return PHOTOS[request.param]()
 
 
-def placement(photo, *, angle=0.0, scale=1.0, dx=0.0, dy=0.0):
-    """(2, 3) affine: the photo fitted into the frame, turned by `angle` degrees
-    counter-clockwise about its centre, scaled by `scale`, moved by (dx, dy) px."""
-    h, w = photo.shape[:2]
-    matrix = cv2.getRotationMatrix2D((w / 2, h / 2), angle, scale * min(W / w, H / h))
-    matrix[:, 2] += (W / 2 - w / 2 + dx, H / 2 - h / 2 + dy)
-    return matrix
-
-
-def place(photo, matrix):
-    return cv2.warpAffine(photo, matrix, (W, H), flags=cv2.INTER_LINEAR,
-                          borderMode=cv2.BORDER_REPLICATE)
-
-
 def track(tmp_path, frames, tracker="face", **options):
     """Write the frames as a lossless video, read it back through the camera source."""
-    path = tmp_path / f"{tracker}.mkv"
-    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"FFV1"), 25.0, (W, H))
-    assert writer.isOpened()
-    for frame in frames:
-        writer.write(frame)
-    writer.release()
+    path = write_video(tmp_path / f"{tracker}.mkv", frames)
     with open_source(f"camera:{path}:{tracker}", realtime=False, **options) as source:
         values = np.array([frame.values for frame in source])
         assert source.ended and values.shape == (len(frames), len(source.channels))
@@ -111,54 +108,14 @@ def test_head_position_and_scale_follow_translation_and_scale(tmp_path, photo):
     assert np.ptp(values[:, FACE["head_roll"]]) < 3.0
 
 
-def open_jaw(image, mouth, chin, corners, cheeks, opening):
-    """The lower face warped open by `opening` px: below the lip line the face moves down, by
-    a lens-shaped gap between the mouth corners (filled with a dark mouth) that widens into a
-    jaw-wide shift at the chin and fades out down the neck.
-
-    mouth : (x, y) [px] the lips' meeting point; chin : y [px]; corners : (x_right, x_left)
-    mouth corners; cheeks : (x_right, x_left) the face's sides."""
-    ys, xs = np.mgrid[0:H, 0:W].astype(np.float32)
-    cx, my = mouth
-    half_mouth = (corners[1] - corners[0]) / 2
-    half_face = (cheeks[1] - cheeks[0]) / 2
-    u = np.clip(np.abs(xs - cx) / half_mouth, 0, 1)
-    gap = opening * np.sqrt(1 - u ** 2)
-    across = np.clip(1.6 - 1.3 * np.abs(xs - cx) / half_face, 0, 1)
-    jaw = opening * across * across * (3 - 2 * across)
-    below = ys - my
-    t = np.clip(below / (chin - my), 0, 1)
-    shift = gap * (1 - t) + jaw * t
-    neck = chin + 1.5 * (chin - my)
-    shift = np.where(ys > chin, jaw * np.clip((neck - ys) / (neck - chin), 0, 1), shift)
-    shift = np.where(below < 0, 0, shift)
-    warped = cv2.remap(image, xs, (ys - shift).astype(np.float32), cv2.INTER_LINEAR,
-                       borderMode=cv2.BORDER_REPLICATE)
-    inside = ((below >= 0) & (below < gap)).astype(np.float32)
-    edge = np.clip(np.minimum(below, gap - below), 0, 1.5) / 1.5
-    alpha = (inside * edge)[..., None]
-    dark = np.array([35, 25, 70], np.float32)        # BGR: the inside of a mouth
-    return (warped * (1 - alpha) + dark * alpha).astype(np.uint8)
-
-
-def face_points(image):
-    """Face mesh landmarks [px] of one picture (to place the warp; not what is tested)."""
-    from mediapipe.python.solutions import face_mesh
-    with face_mesh.FaceMesh(static_image_mode=True, refine_landmarks=True) as mesh:
-        result = mesh.process(cv2.cvtColor(image, cv2.COLOR_BGR2RGB))
-    return np.array([(p.x * W, p.y * H) for p in result.multi_face_landmarks[0].landmark])
-
-
 def test_jaw_open_rises_as_the_lower_face_is_warped_open(tmp_path, photo):
     still = place(photo, placement(photo))
-    points = face_points(still)
+    points = face_points(still)             # where the mouth is: to place the warp
     span = np.linalg.norm(points[263] - points[33])          # outer eye corners [px]
-    mouth = (points[[61, 291], 0].mean(), points[[13, 14], 1].mean())
-    warp = dict(mouth=mouth, chin=points[152, 1], corners=points[[61, 291], 0],
-                cheeks=points[[234, 454], 0])
     # up to a gap of 0.3 eye spans (a mouth well open), in 7 steps, 3 frames each
     openings = np.repeat(np.linspace(0, 0.3 * span, 7), 3)
-    values = track(tmp_path, [open_jaw(still, opening=d, **warp) for d in openings])
+    warp = jaw_warp(points)
+    values = track(tmp_path, [pictures.open_jaw(still, opening=d, **warp) for d in openings])
     jaw = values[:, FACE["jaw_open"]].reshape(7, 3)
     assert np.isfinite(jaw).all()
     steps = np.median(jaw, axis=1)
@@ -178,11 +135,7 @@ def test_covered_or_absent_face_is_nan_and_not_seen_then_found_again(tmp_path, p
     empty = np.full((H, W, 3), (90, 100, 110), np.uint8)       # no one there
     back = place(photo, placement(photo, dx=-60, dy=20))       # back, somewhere else
     frames = [still] * 4 + [covered] * 10 + [empty] * 10 + [back] * 4
-    path = tmp_path / "cover.mkv"
-    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"FFV1"), 25.0, (W, H))
-    for frame in frames:
-        writer.write(frame)
-    writer.release()
+    path = write_video(tmp_path / "cover.mkv", frames)
     rows, statuses = [], []
     # one frame queued at a time: the reader is at most two frames ahead of what is read
     with open_source(f"camera:{path}:face", realtime=False, queue_size=1) as source:
@@ -240,14 +193,6 @@ def test_smoothing_steadies_a_still_noisy_face_and_follows_a_turn(tmp_path, rng)
     assert not math.isnan(roll_smooth[0])
 
 
-def write_video(path, frames, fps=25.0):
-    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"FFV1"), fps, (W, H))
-    for frame in frames:
-        writer.write(frame)
-    writer.release()
-    return path
-
-
 def test_mop_record_takes_a_face_from_a_camera(tmp_path, capsys):
     from characters import Motion
     from mop.cli import main
@@ -292,3 +237,31 @@ def test_a_glove_performer_takes_a_camera_as_it_is(tmp_path):
     glove = [state["performers"]["glove"] for state in states]
     assert glove[-1]["status"] == "ok"              # frames arrive: a camera, not a failure
     assert all(state["action"] is None for state in glove[-10:])
+
+
+def test_the_webcam_sessions_face_is_followed_through_its_show():
+    """sessions/webcam.toml replayed from its show take (the face tracker's reading of the
+    astronaut made to act): in the second half of every chomp and tilt of the show, the
+    follower names that action. Stand-in puppets: the characters are not what is tested."""
+    from mop.session import Mode, load_session
+    from mop.session.build import Overrides, build_session
+    from mop.takes import TakeStore
+    from session_standin import StripPuppet
+
+    config = load_session(ROOT / "sessions" / "webcam.toml")
+    characters = {"frog": (StripPuppet(("thumb", "index", "middle", "ring", "pinky")), None),
+                  "momo": (StripPuppet(("head",)), None)}
+    replay = Overrides(render=False, replay={"face": "replay:face_show"})
+    session = build_session(config, mode=Mode.REPLAY, characters=characters, overrides=replay)
+    timeline = []
+    session.run(duration=15.0, progress=lambda current: timeline.append(
+        (current.t, current.state()["performers"]["face"]["action"])))
+    show = TakeStore(ROOT / "recordings" / "webcam").load("face_show").extra["show"]
+    durations = pictures.ACTIONS          # [s] each action at the demonstration's pace
+    start = 0.0
+    for action, amount in show:
+        length = amount if action == "rest" else durations[action] / amount
+        if action != "rest":
+            late = [name for t, name in timeline if start + length / 2 <= t < start + length]
+            assert late and all(name == f"face_{action}" for name in late), (action, start)
+        start += length

@@ -96,16 +96,23 @@ def _ramp(value: float, low: float, high: float) -> float:
     return min(max((value - low) / (high - low), 0.0), 1.0)
 
 
+_FLIP = np.array([1.0, -1.0, -1.0])      # image axes (y down, z away) -> viewer axes
+# the distances a face's channels need, as point pairs: measured in one call per frame
+_PAIRS = np.array([(_EYE_L[0], _EYE_R[0]), _LIP_INNER, _MOUTH_CORNERS, *_LIDS_L, *_LIDS_R,
+                   _EYE_L, _EYE_R, _CHEEKS])
+_SPAN, _LIPS, _MOUTH, _LIDS_LEFT, _LIDS_RIGHT, _WIDTH_LEFT, _WIDTH_RIGHT, _CHEEK = (
+    0, 1, 2, slice(3, 6), slice(6, 9), 9, 10, 11)
+
+
 def face_frame(points: np.ndarray) -> np.ndarray:
     """(3, 3) float: the face's axes as rows, in a viewer frame (x right, y up, z towards the
     camera): across the eyes (to the performer's left), up the face, out of the face.
 
     points : (N >= 468, 3) float [px] face mesh landmarks, image axes (y down, z away)."""
-    viewer = points[:, :3] * np.array([1.0, -1.0, -1.0])
-    right_eye = viewer[list(_EYE_R)].mean(axis=0)
-    left_eye = viewer[list(_EYE_L)].mean(axis=0)
+    right_eye = (points[_EYE_R[0]] + points[_EYE_R[1]]) * (0.5 * _FLIP)
+    left_eye = (points[_EYE_L[0]] + points[_EYE_L[1]]) * (0.5 * _FLIP)
     across = _unit(left_eye - right_eye)
-    up = viewer[_FOREHEAD] - viewer[_NOSE_BASE]
+    up = (points[_FOREHEAD] - points[_NOSE_BASE]) * _FLIP
     up = _unit(up - across * float(up @ across))
     out = np.cross(across, up)
     return np.stack([across, up, out])
@@ -126,12 +133,6 @@ def head_angles(frame: np.ndarray) -> tuple[float, float, float]:
     return yaw, pitch, roll
 
 
-def _eye_opening(points: np.ndarray, lids, corners) -> float:
-    gaps = [np.linalg.norm(points[a] - points[b]) for a, b in lids]
-    width = np.linalg.norm(points[corners[0]] - points[corners[1]])
-    return float(np.mean(gaps) / width) if width > 0 else math.nan
-
-
 def face_channels(points: np.ndarray, width: int, height: int,
                   out: np.ndarray | None = None) -> np.ndarray:
     """The face channels (FACE_CHANNELS) of one face.
@@ -145,29 +146,33 @@ def face_channels(points: np.ndarray, width: int, height: int,
     points = np.asarray(points, dtype=np.float64)
     if points.ndim != 2 or points.shape[0] < 468 or points.shape[1] < 3:
         raise ValueError(f"face_channels needs (468 or 478, 3) landmarks, got {points.shape}")
-    span = float(np.linalg.norm(points[_EYE_L[0]] - points[_EYE_R[0]]))
+    distance = np.linalg.norm(points[_PAIRS[:, 0], :3] - points[_PAIRS[:, 1], :3], axis=1)
+    span = distance[_SPAN]
     if not span > 0:
         out[:] = np.nan
         return out
     frame = face_frame(points)
-    up = frame[1]
-    viewer = points * np.array([1.0, -1.0, -1.0])
-    upper, lower = viewer[_LIP_INNER[0]], viewer[_LIP_INNER[1]]
-    out[0] = min(float(np.linalg.norm(upper - lower)) / span / JAW_OPEN_FULL, 1.0)
-    corners = viewer[list(_MOUTH_CORNERS)]
-    out[1] = _ramp(float(np.linalg.norm(corners[1] - corners[0])) / span, *MOUTH_WIDE_RANGE)
-    lift = float((corners.mean(axis=0) - (upper + lower) / 2) @ up) / span
+    # heights along the face's up axis [eye spans]: the mouth corners above the lips' centre,
+    # each brow above its upper lid
+    offsets = np.stack([
+        points[list(_MOUTH_CORNERS)].mean(axis=0) - points[list(_LIP_INNER)].mean(axis=0),
+        points[list(_BROW_L)].mean(axis=0) - points[_UPPER_LID_L],
+        points[list(_BROW_R)].mean(axis=0) - points[_UPPER_LID_R]])
+    lift, brow_left, brow_right = (offsets * _FLIP) @ frame[1] / span
+    out[0] = min(distance[_LIPS] / span / JAW_OPEN_FULL, 1.0)
+    out[1] = _ramp(distance[_MOUTH] / span, *MOUTH_WIDE_RANGE)
     out[2] = _ramp(lift, *SMILE_RANGE)
-    for slot, brow, lid in ((3, _BROW_L, _UPPER_LID_L), (4, _BROW_R, _UPPER_LID_R)):
-        height_above = float((viewer[list(brow)].mean(axis=0) - viewer[lid]) @ up) / span
-        out[slot] = _ramp(height_above, *BROW_RANGE)
-    out[5] = 1.0 - _ramp(_eye_opening(points, _LIDS_L, _EYE_L), *EYE_OPEN_RANGE)
-    out[6] = 1.0 - _ramp(_eye_opening(points, _LIDS_R, _EYE_R), *EYE_OPEN_RANGE)
+    out[3] = _ramp(brow_left, *BROW_RANGE)
+    out[4] = _ramp(brow_right, *BROW_RANGE)
+    opening_left = distance[_LIDS_LEFT].mean() / distance[_WIDTH_LEFT]
+    opening_right = distance[_LIDS_RIGHT].mean() / distance[_WIDTH_RIGHT]
+    out[5] = 1.0 - _ramp(opening_left, *EYE_OPEN_RANGE)
+    out[6] = 1.0 - _ramp(opening_right, *EYE_OPEN_RANGE)
     out[7:10] = head_angles(frame)
-    between = (points[list(_EYE_R)].mean(axis=0) + points[list(_EYE_L)].mean(axis=0)) / 2
+    between = (points[_EYE_R[0]] + points[_EYE_R[1]] + points[_EYE_L[0]] + points[_EYE_L[1]]) / 4
     out[10] = between[0] / width
     out[11] = between[1] / height
-    out[12] = float(np.linalg.norm(points[_CHEEKS[1]] - points[_CHEEKS[0]])) / width
+    out[12] = distance[_CHEEK] / width
     return out
 
 

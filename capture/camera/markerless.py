@@ -20,6 +20,7 @@ from __future__ import annotations
 import importlib.metadata
 import importlib.util
 import logging
+import math
 from pathlib import Path
 
 import numpy as np
@@ -87,6 +88,33 @@ def models_status() -> dict:
                            f"{', '.join(missing)} (MediaPipe 0.10.30 and later download them at "
                            f"run time, which mop never does): {EXTRA}")
     return status
+
+
+def assign_sides(hands: list[tuple[str, float, tuple[float, float]]],
+                 last_wrist: dict) -> list[str]:
+    """The performer's side of each detected hand, each side once.
+
+    hands : [(side MediaPipe gave, its score 0..1, wrist (x, y) image fractions)] in detection
+    order; last_wrist : {"right": (x, y) | None, "left": ...} where each side's wrist was on the
+    previous frame. Two hands given the same side: the higher score keeps it, the other takes
+    the other side. A lone hand given a side with a score under 0.8 takes the other side when
+    that side's wrist was seen last frame nearer to it (a hand's side should not flip while it
+    stays in view)."""
+    if len(hands) >= 2:
+        (side_a, score_a, _), (side_b, score_b, _) = hands[:2]
+        if side_a != side_b:
+            return [side_a, side_b]
+        other = "left" if side_a == "right" else "right"
+        return [side_a, other] if score_a >= score_b else [other, side_a]
+    if len(hands) == 1:
+        side, score, wrist = hands[0]
+        other = "left" if side == "right" else "right"
+        if score < 0.8 and last_wrist.get(other) is not None:
+            to_other = math.dist(wrist, last_wrist[other])
+            if last_wrist.get(side) is None or to_other < math.dist(wrist, last_wrist[side]):
+                return [other]
+        return [side]
+    return []
 
 
 class MediapipeTracker(Tracker):
@@ -196,9 +224,8 @@ class HandsTracker(MediapipeTracker):
     The `hand` hand (default "right", the performer's own) gives the channels under the glove
     profiles' names (thumb, index, middle, ring, pinky, pinch, wrist_x, wrist_y, roll), so a
     glove performer's session takes `camera:0:hands` as it is; the other hand's are prefixed
-    with its side ("left.thumb", ...). Which is which comes from MediaPipe's handedness; two
-    hands given the same side are told apart by their scores, and a lone hand whose side is
-    uncertain keeps the side of the slot it is nearest to.
+    with its side ("left.thumb", ...). Which is which comes from MediaPipe's handedness, made
+    steady by `assign_sides`.
 
     model : "full" (default) or "lite" (faster, a little less precise).
     max_hands : 2 (default) or 1. MediaPipe looks for more hands (its palm detector, the
@@ -249,27 +276,6 @@ class HandsTracker(MediapipeTracker):
             side = "right" if side == "left" else "left"
         return side
 
-    def assign(self, hands: list[tuple[str, float, tuple[float, float]]]) -> list[str]:
-        """Sides for detected hands [(side, score, wrist (x, y))] -> [side], each side once."""
-        if len(hands) >= 2:
-            (side_a, score_a, _), (side_b, score_b, _) = hands[:2]
-            if side_a == side_b:
-                first = 0 if score_a >= score_b else 1
-                sides = [side_a, side_a]
-                sides[1 - first] = "left" if side_a == "right" else "right"
-                return sides
-            return [side_a, side_b]
-        if len(hands) == 1:
-            side, score, wrist = hands[0]
-            other = "left" if side == "right" else "right"
-            if score < 0.8 and self._last_wrist[other] is not None:
-                near = np.hypot(*np.subtract(wrist, self._last_wrist[other]))
-                if self._last_wrist[side] is None or near < np.hypot(
-                        *np.subtract(wrist, self._last_wrist[side])):
-                    return [other]
-            return [side]
-        return []
-
     def process(self, image: np.ndarray) -> np.ndarray:
         rgb = self._rgb_of(image)
         result = self._solution.process(rgb)
@@ -283,7 +289,7 @@ class HandsTracker(MediapipeTracker):
             wrist = landmarks.landmark[0]
             hands.append((self._side(category.label), float(category.score),
                           (wrist.x, wrist.y)))
-        sides = self.assign(hands)
+        sides = assign_sides(hands, self._last_wrist)
         self.seen = bool(sides)
         size = len(HAND_CHANNELS)
         present = set()

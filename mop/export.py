@@ -119,6 +119,41 @@ def over_colour(rgba: np.ndarray, colour, out: np.ndarray | None = None) -> np.n
     return out
 
 
+class OverColourBGR:
+    """RGBA frames over one colour into a reused (H', W', 3) uint8 BGR buffer (OpenCV's
+    order), the same arithmetic as `over_colour` with nothing allocated per frame: a frame
+    costs a copy of the colour, the compiled blend and one channel conversion.
+
+    colour : (r, g, b); size : (width, height) [px] of the buffer, at least the frame's (the
+    frame goes top-left, the rest stays the colour: video codecs' padding). Calling it with an
+    (h, w, 4) RGBA frame returns the buffer, overwritten by the next call."""
+
+    def __init__(self, colour, size: tuple[int, int]):
+        import cv2
+        rgb = parse_background(colour)
+        if rgb is None:
+            raise ValueError("OverColourBGR needs a colour, got 'transparent'")
+        width, height = self.size = _check_size(size)
+        self._blank = np.empty((height, width, 4), np.uint8)
+        self._blank[:, :, :3] = rgb
+        self._blank[:, :, 3] = 255
+        self._canvas = np.empty_like(self._blank)
+        self._bgr = np.empty((height, width, 3), np.uint8)
+        self._convert = cv2.cvtColor
+        self._code = cv2.COLOR_RGBA2BGR
+        from mop.render.compose import blend_over
+        self._blend = blend_over
+
+    def __call__(self, frame: np.ndarray) -> np.ndarray:
+        height, width = self._canvas.shape[:2]
+        if frame.shape[0] > height or frame.shape[1] > width:
+            raise ValueError(f"frame has shape {frame.shape}, larger than the ({height}, "
+                             f"{width}) buffer")
+        np.copyto(self._canvas, self._blank)
+        self._blend(self._canvas, np.ascontiguousarray(frame), 0, 0, opaque=True)
+        return self._convert(self._canvas, self._code, dst=self._bgr)
+
+
 def compose_layers(layers: Iterable, *, size: tuple[int, int],
                    background="transparent") -> np.ndarray:
     """Several RGBA layers composed back to front into one frame.
@@ -292,13 +327,24 @@ class VideoFileWriter(FrameWriter):
             raise ValueError(f"OpenCV could not open {path} for writing with codec "
                              f"{self.FOURCC[path.suffix.lower()]}")
         self._resource["writer"] = writer
-        self._bgr = np.empty((self.padded[1], self.padded[0], 3), np.uint8)
-        self._bgr[...] = self.background[::-1]
+        self._flatten = OverColourBGR(self.background, self.padded)
+        self._bgr = None                      # the last frame as encoded
 
     def _write(self, frame):
-        width, height = self.size
-        rgb = over_colour(frame, self.background)
-        self._bgr[:height, :width] = rgb[:, :, ::-1]
+        self._bgr = self._flatten(frame)
+        self._encode()
+
+    def repeat(self) -> None:
+        """Append the last frame again: its encoded picture is kept, so nothing is converted
+        (a live session's dropped render)."""
+        if self._closed:
+            raise ValueError(f"writer for {self.path} is closed")
+        if self._bgr is None:
+            raise ValueError(f"nothing to repeat: no frame was written to {self.path} yet")
+        self._encode()
+        self.frames_written += 1
+
+    def _encode(self) -> None:
         self._resource["writer"].write(self._bgr)
         if (self.frames_written + 1) % SPACE_CHECK_FRAMES == 0 \
                 and free_bytes(self.path.parent) == 0:

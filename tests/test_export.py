@@ -7,8 +7,8 @@ import textwrap
 import numpy as np
 import pytest
 
-from mop.export import (CHROMA_GREEN, compose_layers, open_writer, over_colour,
-                        parse_background, write_frames)
+from mop.export import (CHROMA_GREEN, OverColourBGR, compose_layers, open_writer,
+                        over_colour, parse_background, write_frames)
 
 cv2 = pytest.importorskip("cv2")
 
@@ -64,6 +64,42 @@ def test_over_colour_matches_float_formula(rng):
     expected = np.round(rgba[:, :, :3] * a + np.array(colour) * (1 - a)).astype(int)
     assert np.abs(over_colour(rgba, colour).astype(int) - expected).max() <= 1
     assert np.array_equal(over_colour(rgba[:, :, :3], colour), rgba[:, :, :3])  # RGB is opaque
+
+
+def test_over_colour_bgr_matches_over_colour_in_one_buffer(rng):
+    colour = (10, 200, 77)
+    flatten = OverColourBGR(colour, (33, 21))
+    first = rng.integers(0, 256, (20, 30, 4), dtype=np.uint8)
+    out = flatten(first)
+    assert out.shape == (21, 33, 3)
+    assert np.array_equal(out[:20, :30], over_colour(first, colour)[:, :, ::-1])
+    assert np.all(out[20:] == colour[::-1]) and np.all(out[:, 30:] == colour[::-1])
+    second = rng.integers(0, 256, (20, 30, 4), dtype=np.uint8)
+    assert flatten(second) is out                      # the same buffer, overwritten
+    assert np.array_equal(out[:20, :30], over_colour(second, colour)[:, :, ::-1])
+    with pytest.raises(ValueError, match="larger than"):
+        flatten(np.zeros((22, 30, 4), np.uint8))
+    with pytest.raises(ValueError, match="needs a colour"):
+        OverColourBGR("transparent", (4, 4))
+
+
+def test_video_repeat_appends_the_last_frame(tmp_path, rng):
+    frames = _frames(rng, 3)
+    with open_writer(tmp_path / "r.mkv", fps=25, size=(40, 30), background="#102030") as w:
+        with pytest.raises(ValueError, match="nothing to repeat"):
+            w.repeat()
+        w.write(frames[0])
+        w.write(frames[1])
+        w.repeat()
+        w.repeat()
+        w.write(frames[2])
+        assert w.frames_written == 5
+    with pytest.raises(ValueError, match="closed"):
+        w.repeat()
+    back = _read_video(tmp_path / "r.mkv")
+    expected = [over_colour(frames[k], "#102030") for k in (0, 1, 1, 1, 2)]
+    assert len(back) == 5
+    assert all(np.array_equal(read, want) for read, want in zip(back, expected))
 
 
 def _compose_reference(layers, size, colour):

@@ -480,3 +480,32 @@ def test_source_feed_follows_a_capture_source_reporting_disconnected():
     source.queue.append(ListSource.Frame(0.1, [4.0]))
     now[0] = 0.1
     assert feed.poll(0.1) == pytest.approx([4.0]) and feed.status == OK
+
+
+def test_video_output_repeats_a_dropped_picture_without_converting_it_again(tmp_path):
+    """A repeat appends the picture the writer encoded last and never reads the frame handed
+    with it (here a blank one, to tell); a repeat before any picture writes the one given."""
+    cv2 = pytest.importorskip("cv2")
+    from mop.export import over_colour
+    from mop.session.outputs import VideoOutput
+    rng = np.random.default_rng(3)
+    pictures = [rng.integers(0, 256, (24, 32, 4), dtype=np.uint8) for _ in range(2)]
+    blank = np.zeros_like(pictures[0])
+    output = VideoOutput(tmp_path / "v.mkv", fps=25, size=(32, 24), background=(16, 32, 48))
+    writes = [(0, True), (0, True), (1, False), (1, True), (1, True), (0, False)]
+    for k, (picture, repeat) in enumerate(writes):
+        handed = blank if repeat and k > 0 else pictures[picture]
+        output.write(handed, {"frame": k}, repeat=repeat)
+    output.close()
+    assert output.frames == len(writes)
+    capture = cv2.VideoCapture(str(tmp_path / "v.mkv"))
+    read = []
+    while True:
+        ok, frame = capture.read()
+        if not ok:
+            break
+        read.append(frame[:, :, ::-1])
+    capture.release()
+    assert len(read) == len(writes)
+    for frame, (picture, _) in zip(read, writes):
+        assert np.array_equal(frame, over_colour(pictures[picture], (16, 32, 48)))

@@ -62,7 +62,11 @@ class VideoOutput:
         if frame is None:
             return
         self.open()
-        self.writer.write(frame)
+        again = getattr(self.writer, "repeat", None) if repeat and self.frames else None
+        if again is not None:
+            again()                 # the picture it encoded last, not converted again
+        else:
+            self.writer.write(frame)
         self.frames += 1
 
     def close(self) -> None:

@@ -105,8 +105,7 @@ class JpegEncoder:
         self.jpeg_quality = jpeg_quality
         self.publish = None
         self._last = -math.inf
-        self._rgb: np.ndarray | None = None
-        self._bgr: np.ndarray | None = None
+        self._flatten = None                  # mop.export.OverColourBGR, once sized
 
     def connect(self, publish) -> None:
         self.publish = publish
@@ -122,12 +121,11 @@ class JpegEncoder:
         """JPEG of an RGBA frame; transparent parts over dark grey."""
         import cv2
 
-        from mop.export import over_colour
-        if self._rgb is None or self._rgb.shape[:2] != frame.shape[:2]:
-            self._rgb = np.empty(frame.shape[:2] + (3,), np.uint8)
-            self._bgr = np.empty_like(self._rgb)
-        over_colour(frame, (40, 40, 40), out=self._rgb)
-        bgr = cv2.cvtColor(self._rgb, cv2.COLOR_RGB2BGR, dst=self._bgr)
+        from mop.export import OverColourBGR
+        size = (frame.shape[1], frame.shape[0])
+        if self._flatten is None or self._flatten.size != size:
+            self._flatten = OverColourBGR((40, 40, 40), size)
+        bgr = self._flatten(frame)
         ok, data = cv2.imencode(".jpg", bgr, [cv2.IMWRITE_JPEG_QUALITY, self.jpeg_quality])
         if not ok:
             raise RuntimeError("JPEG encoding of the preview frame failed")

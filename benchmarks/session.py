@@ -3,6 +3,7 @@ and the shipped demo performed live.
 
     python3 benchmarks/session.py [--frames 150] [--mix image,demo] [--render]
     python3 benchmarks/session.py --live [--busy] [--seconds 11]
+    python3 benchmarks/session.py --writer
 
 For each size it builds a session on the shipped demo takes (each performer replays the glove or
 the hand show; each character is bound to one performer's action) and prints, per frame:
@@ -25,6 +26,10 @@ process holds the second core. It prints the pictures dropped (target <= 5 % wit
 otherwise idle) and the input-to-pose latency (target p90 <= 10 ms), against the same show
 performed live without pictures (the loop alone) in the same run. --pictures thread,process
 compares the two render workers (`mop.session.worker`).
+
+--writer times one 960x540 MP4 frame on one core as the session's video output writes it
+(`mop.export` VideoFileWriter: a new frame, and a dropped render's repeat) against a plain
+reference in the same run: `over_colour`, a reversed-channel copy to BGR, OpenCV's write.
 """
 from __future__ import annotations
 
@@ -211,6 +216,48 @@ def live(seconds: float, busy: bool, workers: list[str]) -> None:
           "<= 10 ms")
 
 
+def writer_cost(repeats: int = 60) -> None:
+    """Median milliseconds of one 960x540 MP4 frame, written three ways (see the module)."""
+    import tempfile
+
+    import cv2
+
+    from mop.export import open_writer, over_colour
+    rng = np.random.default_rng(0)
+    colour = (29, 35, 48)                       # the demo's background
+    frame = np.empty((540, 960, 4), np.uint8)
+    frame[:, :, :3], frame[:, :, 3] = colour, 255
+    frame[100:400, 100:500] = rng.integers(0, 256, (300, 400, 4))   # a translucent character
+    bgr = np.empty((540, 960, 3), np.uint8)
+
+    def median(write) -> float:
+        times = []
+        for _ in range(repeats):
+            start = time.perf_counter()
+            write()
+            times.append(time.perf_counter() - start)
+        return 1e3 * float(np.median(times))
+
+    def plain(encoder):
+        bgr[...] = over_colour(frame, colour)[:, :, ::-1]
+        encoder.write(bgr)
+
+    with tempfile.TemporaryDirectory() as folder:
+        encoder = cv2.VideoWriter(str(Path(folder) / "plain.mp4"),
+                                  cv2.VideoWriter_fourcc(*"mp4v"), 25.0, (960, 540))
+        reference = median(lambda: plain(encoder))
+        encoder.release()
+        with open_writer(Path(folder) / "demo.mp4", fps=25, size=(960, 540),
+                         background=colour) as writer:
+            new = median(lambda: writer.write(frame))
+            again = median(writer.repeat)
+    print(f"one 960x540 MP4 frame, median of {repeats}, one core (ms)")
+    print(f"{'plain reference (over_colour, BGR copy, write)':<48}{reference:>7.2f}")
+    print(f"{'VideoFileWriter.write':<48}{new:>7.2f}{reference / new:>7.1f}x")
+    print(f"{'VideoFileWriter.repeat (a dropped render)':<48}{again:>7.2f}"
+          f"{reference / again:>7.1f}x")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--live", action="store_true",
@@ -222,6 +269,8 @@ def main() -> None:
     parser.add_argument("--pictures", default="process",
                         help="with --live: render worker(s) to measure, 'process' and/or "
                              "'thread', comma-separated")
+    parser.add_argument("--writer", action="store_true",
+                        help="time one MP4 frame as the video output writes it")
     parser.add_argument("--frames", type=int, default=150)
     parser.add_argument("--mix", default="image,demo", help="image, demo or both")
     parser.add_argument("--render", action="store_true",
@@ -233,6 +282,9 @@ def main() -> None:
         return
     if hasattr(os, "sched_setaffinity") and args.cores:
         os.sched_setaffinity(0, set(sorted(os.sched_getaffinity(0))[:args.cores]))
+    if args.writer:
+        writer_cost()
+        return
     print(f"session benchmark: {args.frames} frames at 25 fps, replay mode, "
           f"{len(os.sched_getaffinity(0)) if hasattr(os, 'sched_getaffinity') else '?'} core(s)"
           f"{', rendering 640x360' if args.render else ', no rendering'}")

@@ -92,12 +92,13 @@ def _align(reference, take, weight):
     a = reference * np.sqrt(weight)
     b = take * np.sqrt(weight)
     distance = (a * a).sum(axis=1)[:, None] + (b * b).sum(axis=1)[None, :] - 2.0 * (a @ b.T)
-    return _warp(np.maximum(distance, 0.0))
+    return warp(np.maximum(distance, 0.0))
 
 
 @nb.njit(cache=True)
-def _warp(distance):
-    """The alignment of ``_align`` from its (S, N) matrix of frame distances."""
+def warp(distance):
+    """The alignment of ``_align`` from its (S, N) matrix of frame distances: for each row, the
+    first and last column on the dynamic-time-warping path (S, 2) int64."""
     S, N = distance.shape
     cost = np.full((S + 1, N + 1), np.inf)
     cost[0, 0] = 0.0

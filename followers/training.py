@@ -23,6 +23,7 @@ import numpy as np
 
 from followers._baum_welch import accumulate, emission_log, forward_backward
 from followers.defaults import as_template, default_sigma
+from followers.demos import warp
 from followers.follower import Follower
 from followers.preprocessing import resample
 
@@ -58,41 +59,29 @@ def left_to_right(states: int, *, skips: int = 1) -> np.ndarray:
 
 
 @nb.njit(cache=True)
-def _dtw_map(reference, other):
-    """For each frame of ``other (N, D)``, the frame of ``reference (S, D)`` it aligns with
-    under dynamic time warping (squared Euclidean cost, steps (1,0), (0,1), (1,1)).
-    Returns (N,) int64."""
-    S = reference.shape[0]
-    N = other.shape[0]
-    cost = np.full((S + 1, N + 1), np.inf)
-    cost[0, 0] = 0.0
-    for i in range(1, S + 1):
-        for j in range(1, N + 1):
+def _squared_distances(reference, other):
+    """(S, N) squared Euclidean distances between the frames of ``reference (S, D)`` and
+    ``other (N, D)``."""
+    S, N = reference.shape[0], other.shape[0]
+    distance = np.empty((S, N))
+    for i in range(S):
+        for j in range(N):
             c = 0.0
             for d in range(reference.shape[1]):
-                diff = reference[i - 1, d] - other[j - 1, d]
+                diff = reference[i, d] - other[j, d]
                 c += diff * diff
-            best = cost[i - 1, j - 1]
-            if cost[i - 1, j] < best:
-                best = cost[i - 1, j]
-            if cost[i, j - 1] < best:
-                best = cost[i, j - 1]
-            cost[i, j] = c + best
-    mapping = np.zeros(N, dtype=np.int64)
-    i = S
-    j = N
-    while i > 0 and j > 0:
-        mapping[j - 1] = i - 1
-        diag = cost[i - 1, j - 1]
-        up = cost[i - 1, j]
-        left = cost[i, j - 1]
-        if diag <= up and diag <= left:
-            i -= 1
-            j -= 1
-        elif up <= left:
-            i -= 1
-        else:
-            j -= 1
+            distance[i, j] = c
+    return distance
+
+
+def _dtw_map(reference, other):
+    """For each frame of ``other (N, D)``, the frame of ``reference (S, D)`` it aligns with
+    under dynamic time warping (squared Euclidean cost, steps (1,0), (0,1), (1,1)); where
+    several reference frames share it, the first. Returns (N,) int64."""
+    span = warp(_squared_distances(reference, other))
+    mapping = np.zeros(other.shape[0], dtype=np.int64)
+    for i in range(span.shape[0] - 1, -1, -1):
+        mapping[span[i, 0]:span[i, 1] + 1] = i
     return mapping
 
 

@@ -41,4 +41,7 @@ extras="all"
 # one: put the headless files back (same version, no GUI libraries needed)
 headless=$(.venv/bin/python -m pip show opencv-contrib-python-headless | sed -n 's/^Version: //p')
 .venv/bin/python -m pip install -q --force-reinstall --no-deps "opencv-contrib-python-headless==$headless"
+if [ "$want_tests" = 1 ] && git rev-parse --is-inside-work-tree >/dev/null 2>&1; then
+    git config core.hooksPath scripts/hooks     # commit subjects under 72 characters
+fi
 echo "setup: done (.venv/bin/mop is the command)"

@@ -6,7 +6,7 @@ import time
 import numpy as np
 import pytest
 
-from capture import Frame, Resampled, Status, open_source
+from capture import Frame, Resampled, Source, Status, open_source
 from capture.resample import align_durations, interpolate, regular_grid, resample
 from capture.spec import parse_options, split_spec
 from capture.store import StoreWriter
@@ -155,16 +155,73 @@ def test_streaming_linear_resampling_equals_the_batch_kernel(tmp_path, rng):
     assert [f.seq for f in frames] == list(range(len(grid)))
 
 
-def test_hold_resampling_is_paced_by_the_clock(tmp_path):
+class SteppedClock:
+    """A clock that moves only when someone sleeps on it: `sleep_until` jumps to the deadline."""
+
+    def __init__(self):
+        self.t = 0.0
+
+    def now(self):
+        return self.t
+
+    def sleep_until(self, deadline, stop=None):
+        self.t = max(self.t, deadline)
+        return True
+
+
+class Scripted(Source):
+    """Stored frames, each readable once the clock has reached its time; silent after the last."""
+
+    kind = "scripted"
+    stall_timeout = 0.1
+
+    def __init__(self, times, values, clock):
+        super().__init__(("a",), 100.0, clock=clock)
+        self.frames = [Frame(t, [v]) for t, v in zip(times, values)]
+
+    @property
+    def status(self):
+        return Status.OK
+
+    def read(self, timeout=None):
+        if self.frames and self.frames[0].t <= self.clock.now():
+            return self.frames.pop(0)
+        return None
+
+
+def test_hold_resampling_holds_the_newest_raw_value_at_each_grid_time():
+    clock = SteppedClock()
+    times = np.arange(50) / 100.0                      # 100 Hz for 0.5 s, then silence
+    source = Resampled(Scripted(times, times, clock), 20.0, method="hold")
+    frames = [source.read(timeout=1.0) for _ in range(14)]
+    stamps = np.array([f.t for f in frames])
+    np.testing.assert_allclose(stamps, np.arange(14) * 0.05, atol=1e-12)
+    held = np.array([f.values[0] for f in frames])
+    newest = [times[times <= t + 1e-12].max() for t in stamps]
+    np.testing.assert_array_equal(held[:12], newest[:12])
+    # 0.1 s stall timeout after the last raw frame at 0.49 s: NaN from 0.60 s on
+    assert np.all(np.isnan(held[12:])) and not np.isnan(held[:12]).any()
+    # a reader 0.2 s late skips the grid points it missed instead of bursting them out
+    clock.t += 0.2
+    late = source.read(timeout=1.0)
+    assert late.t == pytest.approx(0.85) and source.stats.dropped == 3   # 0.70, 0.75, 0.80
+
+
+def test_hold_resampling_of_a_replay_is_paced_by_the_clock(tmp_path):
     times = np.arange(100) * 0.01                      # 100 Hz for 1 s
     write_take(tmp_path / "take.sqlite", times, np.c_[times, times])
     with open_source(f"replay:{tmp_path / 'take'}", rate=20, resample="hold") as source:
-        frames = [source.read(timeout=1.0) for _ in range(10)]
+        frames, returned = [], []
+        for _ in range(10):
+            frames.append(source.read(timeout=1.0))
+            returned.append(time.monotonic())          # the capture clock is CLOCK_MONOTONIC
     stamps = np.array([f.t for f in frames])
-    np.testing.assert_allclose(np.diff(stamps), 0.05, atol=1e-9)
+    steps = np.diff(stamps) / 0.05                     # grid points, whole ones (late reads skip)
+    np.testing.assert_allclose(steps, np.round(steps), atol=1e-6)
+    assert np.all(np.round(steps) >= 1)
+    assert np.all(np.array(returned) >= stamps)        # paced: no frame before its time
     held = np.array([f.values[0] for f in frames])
-    # the newest raw value at each grid time: close to the time since the start
-    assert np.all(np.abs(held - (stamps - stamps[0])) < 0.03)
+    assert np.all(np.diff(held) >= 0) and held[-1] > held[0]
 
 
 @pytest.mark.parametrize("spec, message", [

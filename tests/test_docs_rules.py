@@ -2,8 +2,11 @@
 two commands; guides stay guides (their API in one screen first, none over 30 KB); every figure
 the README quotes links to a table of docs/benchmarks.md that exists, and every benchmark script
 has its dated table there; and no file speaks of how or when the project was built (numbered
-revisions, sittings, tickets, scratch paths)."""
+revisions, sittings, tickets, scratch paths); commit subjects stay under 72 characters, refused
+by the commit-msg hook and checked on every commit since the hook exists."""
 import re
+import shutil
+import subprocess
 from pathlib import Path
 
 import pytest
@@ -111,3 +114,44 @@ def test_every_benchmark_script_has_a_dated_table():
                                     heading) for heading in headings)]
     assert not missing, ("benchmarks without a '## Name — `benchmarks/x.py` (YYYY-MM-DD)' table "
                          "in docs/benchmarks.md: " + ", ".join(missing))
+
+
+HOOK = ROOT / "scripts" / "hooks" / "commit-msg"
+
+
+@pytest.mark.parametrize("message, refused", [
+    ("Capture: a short subject\n\nFigures in the body, as long as they like to be.\n", None),
+    ("x" * 71 + "\n", None),
+    ("# a comment line git strips\nSessions: short\n", None),
+    ("x" * 72 + "\n", "the subject is 72 characters"),
+    ("Sessions: a subject\nthat runs on\n", "leave a blank line after the subject"),
+])
+def test_the_commit_hook_refuses_long_subjects(tmp_path, message, refused):
+    path = tmp_path / "COMMIT_EDITMSG"
+    path.write_text(message)
+    result = subprocess.run([str(HOOK), str(path)], capture_output=True, text=True)
+    assert result.returncode == (0 if refused is None else 1)
+    assert (refused or "") in result.stderr
+
+
+def _git(*args):
+    return subprocess.run(["git", "-C", str(ROOT), *args], capture_output=True, text=True,
+                          check=True).stdout
+
+
+@pytest.mark.skipif(shutil.which("git") is None or not (ROOT / ".git").exists(),
+                    reason="not a git checkout")
+def test_every_commit_since_the_hook_has_a_short_subject():
+    added = _git("log", "--diff-filter=A", "--format=%H", "--", "scripts/hooks/commit-msg")
+    if not added.strip():
+        pytest.skip("the hook is not committed yet")
+    first = added.split()[-1]
+    messages = _git("log", "--format=%H%x1f%B%x1e", f"{first}~1..HEAD").split("\x1e")
+    long = []
+    for entry in filter(str.strip, messages):
+        sha, body = entry.strip().split("\x1f", 1)
+        lines = body.splitlines() + [""]
+        if len(lines[0]) >= 72 or lines[1].strip():
+            long.append(f"{sha[:9]} {lines[0][:60]}")
+    assert not long, "commit subjects of 72 characters or more, or without a blank line: " + (
+        "; ".join(long))

@@ -2,9 +2,10 @@
 
 A device index is a live camera: frames are stamped when grabbed, and a camera that stops
 delivering is reopened. A video file stands in for a camera: by default it plays at its own
-frame rate (realtime=True), from the moment its first frame is asked for (`read`), not when it
-is opened, so a session's build or a countdown does not eat its beginning; with realtime=False
-it is read as fast as the tracker goes, without dropping a frame (tests, offline processing).
+frame rate (realtime=True, each frame stamped with its scheduled time), from the moment its
+first frame is asked for (`read`), not when it is opened, so a session's build or a countdown
+does not eat its beginning; with realtime=False it is read as fast as the tracker goes, without
+dropping a frame (tests, offline processing).
 At the end a file ends the source (or loops).
 
 Live (a camera, or a file in real time), two threads share the work: the reader grabs every
@@ -208,6 +209,7 @@ class CameraSource(ThreadedSource):
                 return
             self._held = False
             self._started_at = self.clock.now()
+        due = None
         if self.is_file and self.realtime:
             due = self._started_at + self._index / self.rate
             if not self.clock.sleep_until(due, self._stop):
@@ -221,7 +223,10 @@ class CameraSource(ThreadedSource):
                 self._index = 0
                 return
             raise EndOfStream
-        t = self.clock.now()
+        # a file played in real time is stamped with each frame's scheduled time, as a replayed
+        # take is (a late grab shows in the latency, not in the frame spacing); a camera's grab
+        # with the time it came
+        t = self.clock.now() if due is None else due
         # smoothing runs on the picture's own time: a file's frame times, a camera's grabs
         picture_t = self._pictures / self.rate if self.is_file else t
         self._pictures += 1

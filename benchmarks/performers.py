@@ -2,7 +2,7 @@
 
     python3 benchmarks/performers.py            # everything (about ten minutes on 2 cores)
     python3 benchmarks/performers.py --quick    # fewer draws and recordings
-    python3 benchmarks/performers.py --only recognition|rejection|intervals|still|timing
+    python3 benchmarks/performers.py --only recognition|calibration|rejection|intervals|still|timing
 
 Every protocol takes the demonstrations from a set's train split and the performances from
 its test split (other takes, other performers); every setting was chosen on train splits
@@ -26,6 +26,7 @@ import numpy as np  # noqa: E402
 
 from followers import (BankConfig, Follower, FollowerBank, aeon_dataset,  # noqa: E402
                        normalise, time_warp)
+from followers.calibration import calibrate, measure  # noqa: E402
 
 SPEEDS = (0.5, 1.0, 2.0)
 
@@ -138,6 +139,73 @@ def recognition(args):
         say(f"  {label:<56} {got[0]:5.1f} / {got[1]:5.1f} / {got[2]:5.1f} %  (target >= "
             f"{target[0]} / {target[1]} / {target[2]}: "
             f"{verdict(all(g >= t for g, t in zip(got, target)))})")
+
+
+def calibration_take(takes, rate):
+    """A calibration take made of real recordings: the rest pose (the takes' median first
+    frame, held 2 s), then the takes one after another (the range)."""
+    rest = np.median(np.array([t[0] for t in takes]), axis=0)
+    hold = np.repeat(rest[None, :], int(2 * rate) + 1, axis=0)
+    values = np.vstack([hold, *takes])
+    return measure(values, rate=rate)
+
+
+class Stranger:
+    """Another performer: per channel a gain about the author's mean and an offset in units of
+    the author's spread, fixed for the performer."""
+
+    def __init__(self, centre, spread, rng, gain, offset):
+        D = centre.size
+        self.centre = centre
+        self.gain = 1 + gain * rng.uniform(-1.0, 1.0, size=D)
+        self.offset = offset * spread * rng.uniform(-1.0, 1.0, size=D)
+
+    def __call__(self, take):
+        return (take - self.centre) * self.gain + self.centre + self.offset
+
+
+def calibrated_accuracy(data, rate, differences, performers, seed):
+    """{(gain, offset): (as recorded, another performer, calibrated) accuracy [%] after 25 /
+    50 / 100 %}. Bank: 5 train takes per class; the author's calibration take from one train
+    take per class; each performer's from one of its test takes per class, scored on its
+    other test takes."""
+    X, y, Xt, yt = data
+    classes = classes_of(y)
+    demos = draw(X, y, classes, 5, None)
+    bank, normaliser = bank_of(demos)
+    author = calibration_take([demos[c][0] for c in classes], rate)
+    flat = np.vstack([t for takes in demos.values() for t in takes])
+    centre, spread = flat.mean(axis=0), flat.std(axis=0)
+    rng = np.random.default_rng(seed)
+    out = {}
+    for gain, offset in differences:
+        rows = {"as recorded": [], "another performer": [], "calibrated": []}
+        for _ in range(performers):
+            stranger = Stranger(centre, spread, rng, gain, offset)
+            own = [rng.choice(np.flatnonzero(yt == c)) for c in classes]
+            mine = calibration_take([stranger(Xt[i]) for i in own], rate)
+            mapped = calibrate(mine, author)
+            for i, (x, label) in enumerate(zip(Xt, yt)):
+                if i in own:
+                    continue
+                for key, values in (("as recorded", x), ("another performer", stranger(x)),
+                                    ("calibrated", mapped(stranger(x)))):
+                    rows[key].append(recognised(bank, classes, normaliser(values), label))
+        out[(gain, offset)] = {k: 100 * np.mean(v, axis=0) for k, v in rows.items()}
+    return out
+
+
+def calibration(args):
+    say("\n== performer calibration: test takes as another performer would (a gain about the "
+        "mean and an offset per channel), without and with their calibration take ==")
+    differences = ((0.0, 0.0), (0.15, 0.1), (0.3, 0.5))
+    performers = 2 if args.quick else 5
+    for name, data, rate in (("PickupGestureWiimoteZ", wiimote(), 100.0),
+                             ("BasicMotions", basic_motions(), 10.0)):
+        for (gain, offset), rows in calibrated_accuracy(data, rate, differences, performers,
+                                                        9).items():
+            say(f"  {name:<22} gain +-{gain:.0%} offset {offset} spread: " + "; ".join(
+                f"{k} {v[0]:.1f} / {v[1]:.1f} / {v[2]:.1f} %" for k, v in rows.items()))
 
 
 def auroc(positive, negative):
@@ -322,10 +390,11 @@ def timing(args):
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="fewer draws and recordings")
-    parser.add_argument("--only", choices=("recognition", "rejection", "intervals", "still",
-                                           "timing"), default=None)
+    parser.add_argument("--only", choices=("recognition", "calibration", "rejection",
+                                           "intervals", "still", "timing"), default=None)
     args = parser.parse_args()
     for name, section in (("timing", timing), ("recognition", recognition),
+                          ("calibration", calibration),
                           ("rejection", rejection), ("intervals", intervals),
                           ("still", still)):
         if args.only in (None, name):

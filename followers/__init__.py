@@ -24,6 +24,8 @@ __getattr__, __dir__, __all__ = lazy_loader.attach(__name__, submod_attrs={
     "defaults": ["default_sigma", "default_window"],
     # several takes of one action as one template and its spread
     "demos": ["combine", "Demonstrations"],
+    # another performer's input mapped onto the author's (a calibration take each)
+    "calibration": ["Calibration", "ChannelMap", "measure", "calibrate"],
     # training from several demonstrations
     "training": ["train_hmm", "train_follower", "TrainedModel"],
     # feedback after recording

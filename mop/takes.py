@@ -605,3 +605,59 @@ def performer_templates(store: TakeStore, performer: str, *, rate: float,
         channels = take.channels
         templates[info.name] = take.aligned(rate)[1]
     return templates
+
+
+# -- performer calibration takes -----------------------------------------------------------------
+
+CALIBRATION_ACTION = "calibration"
+CALIBRATION_KEY = "performer_calibration"   # metadata of a calibration take: {"rest_seconds"}
+
+
+def is_calibration(take: Take) -> bool:
+    """A performer's calibration take (`mop record --calibrate`): the rest pose held, then
+    every channel through its range; no motion."""
+    return isinstance(take.extra.get(CALIBRATION_KEY), dict)
+
+
+def calibration_of(take: Take, channels: Sequence[str] | None = None):
+    """The `followers.calibration.Calibration` a calibration take measures, over `channels`
+    (default: all of the take's). Raises TakeError naming the take when it is not one, lacks
+    a channel or cannot be measured."""
+    from followers.calibration import REST_SECONDS, measure
+    if not is_calibration(take):
+        raise TakeError(f"take {take.name!r} is not a calibration take (record one with "
+                        f"`mop record --calibrate --performer {take.performer} --source ...`)")
+    names = tuple(channels) if channels else take.channels
+    missing = [c for c in names if c not in take.channels]
+    if missing:
+        raise TakeError(f"calibration take {take.name!r} has no channel {missing[0]!r}; it has "
+                        f"{', '.join(take.channels)}")
+    rest = take.extra[CALIBRATION_KEY].get("rest_seconds", REST_SECONDS)
+    if not isinstance(rest, (int, float)) or not 0 < rest < math.inf:
+        raise TakeError(f"calibration take {take.name!r}: rest_seconds {rest!r} is not a "
+                        f"number of seconds > 0")
+    index = [take.channels.index(c) for c in names]
+    try:
+        return measure(take.values[:, index], take.times, rest_seconds=float(rest),
+                       channels=names)
+    except ValueError as error:
+        raise TakeError(f"calibration take {take.name!r}: {error}") from None
+
+
+def newest_calibration(store: TakeStore, performer: str,
+                       channels: Sequence[str] = ()) -> str | None:
+    """The name of `performer`'s newest complete calibration take holding `channels`, or
+    None."""
+    found = []
+    for info in store.list(performer=performer):
+        if info.action != CALIBRATION_ACTION or not info.complete or info.problem:
+            continue
+        if any(c not in info.channels for c in channels):
+            continue
+        try:
+            take = store.load(info.name)
+        except (TakeError, KeyError):
+            continue
+        if is_calibration(take):
+            found.append((info.created, info.name))
+    return max(found)[1] if found else None

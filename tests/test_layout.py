@@ -41,7 +41,7 @@ LAYERS = {
          "followers._baum_welch", "followers.bank_output",
          "followers.config", "followers.defaults", "followers.preprocessing",
          "followers.transitions", "followers.datasets", "followers.model",
-         "followers.still", "followers.intervals"],
+         "followers.still", "followers.intervals", "followers.calibration"],
         ["followers.bank_model"],
         ["followers.follower", "followers.demos"],
         ["followers.bank", "followers.training"],

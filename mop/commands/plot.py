@@ -33,8 +33,9 @@ def register(subparsers) -> None:
 def bank_for(args):
     """(bank, fps, channels, shift, scale, action names) for the take to be plotted."""
     from mop.session import load_session
-    from mop.session.build import (build_bank, normalisation, open_store, performer_templates,
-                                   resample, take_data)
+    from mop.session.build import (build_bank, normalisation, open_store,
+                                   performer_calibration, performer_templates, resample,
+                                   take_data)
     from mop.session.config import Normalise, PerformerConfig
 
     if args.session:
@@ -51,6 +52,10 @@ def bank_for(args):
             templates, channels, shift, scale = performer_templates(config, performer, takes,
                                                                     where=str(config.path))
             if set(channels) <= set(target.channels):
+                mapped = performer_calibration(config, performer, store, channels,
+                                               where=str(config.path))
+                if mapped is not None:      # as `mop perform` follows this performer
+                    shift, scale = mapped.fold(shift, scale)
                 return (build_bank(templates, performer, config.fps), config.fps, channels,
                         shift, scale, list(templates), target)
         raise ValueError(f"no performer of {config.path} uses the channels of take "

@@ -1,6 +1,9 @@
 """`mop record`: record a demonstration: the performer acts along with a motion while their
 input is captured; the action-motion pair is stored as a take. `--show` records a show take
 instead: a performance with no motion paired, for `mop perform --replay` and sessions.
+`--calibrate` records a performer's calibration take: the rest pose held for 2 s, then every
+channel moved through its range; a session's `calibration = TAKE` maps that performer's input
+onto the author's (`followers.calibration`).
 
 Headless: the motion "plays" as a countdown and a progress bar in the terminal, and a preview
 video of the motion (its channels as curves with a moving cursor) is written with OpenCV, to
@@ -21,6 +24,8 @@ from . import count
 PREVIEW_SIZE = (640, 360)
 PREVIEW_FPS = 25
 MAX_TAKE_SECONDS = 600.0    # a demonstration is seconds long; a longer motion is a mistake
+CALIBRATION_SECONDS = 8.0   # a calibration take: the rest pose, then the range
+REST_SECONDS = 2.0          # its rest part (followers.calibration.REST_SECONDS)
 
 
 def register(subparsers) -> None:
@@ -42,8 +47,13 @@ def register(subparsers) -> None:
     parser.add_argument("--show", action="store_true",
                         help="record a show take: a whole performance, no motion, no "
                              "confusability report (replay it with mop perform --replay)")
+    parser.add_argument("--calibrate", action="store_true",
+                        help="record a calibration take: hold the rest pose for the first "
+                             f"{REST_SECONDS:g} s, then move every channel through its whole "
+                             "range until the end (a session's calibration = TAKE uses it)")
     parser.add_argument("--duration", type=float, default=None, metavar="SECONDS",
-                        help="length of a --show take (default: until Ctrl-C)")
+                        help="length of a --show take (default: until Ctrl-C) or of a "
+                             f"--calibrate take (default {CALIBRATION_SECONDS:g} s)")
     parser.add_argument("--source", required=True, metavar="SPEC",
                         help="what to capture, e.g. hid:p5, camera:0:face, camera:0:hands, "
                              "camera:0:pose, camera:0:aruco, osc:127.0.0.1:9000/glove, "
@@ -202,6 +212,22 @@ def confusability_report(templates: dict, new_name: str) -> list[str]:
     return lines
 
 
+def calibration_report(take) -> list[str]:
+    """What a calibration take measured, per channel, and how to use it."""
+    from mop.takes import calibration_of
+    measured = calibration_of(take)
+    lines = [f"calibration of {take.performer}: rest and range (2nd-98th percentile) per "
+             f"channel"]
+    for name, rest, low, high in zip(measured.channels, measured.rest, measured.low,
+                                     measured.high):
+        still = "  (did not move: only its rest will be matched)" if not high > low else ""
+        lines.append(f"  {name:<24} rest {rest:10.4g}   range {low:10.4g} .. {high:<10.4g}"
+                     f"{still}")
+    lines.append(f"use it in a session: [performers.NAME] calibration = \"{take.name}\" (the "
+                 f"author records one too, with the same channels)")
+    return lines
+
+
 # -- the command ------------------------------------------------------------------------------
 
 def _load_motion(spec: str, store):
@@ -259,6 +285,17 @@ def _plan(args, store) -> tuple:
         raise ValueError(f"--rate must be > 0 Hz, got {args.rate}")
     if args.countdown < 0:
         raise ValueError(f"--countdown must be >= 0 s, got {args.countdown}")
+    if args.show and args.calibrate:
+        raise ValueError("--show and --calibrate are two kinds of take: give one")
+    if args.calibrate:
+        if args.motion is not None:
+            raise ValueError("--calibrate records the rest pose and the range without a motion: "
+                             "leave out --motion")
+        duration = CALIBRATION_SECONDS if args.duration is None else args.duration
+        if not (duration > REST_SECONDS and duration < float("inf")):
+            raise ValueError(f"--duration of a calibration take must be a number of seconds > "
+                             f"{REST_SECONDS:g} (the rest pose), got {duration}")
+        return None, duration, None
     if args.show:
         if args.motion is not None:
             raise ValueError("--show records a performance without a motion: leave out --motion")
@@ -346,9 +383,11 @@ def _countdown(source, seconds: float, action: str) -> float:
 
 def _record(args) -> int:
     from capture import open_source
-    from mop.takes import TakeStore, check_name, performer_templates
+    from mop.takes import (CALIBRATION_ACTION, CALIBRATION_KEY, TakeStore, check_name,
+                           performer_templates)
 
-    action = args.action or ("show" if args.show else None)
+    action = args.action or ("show" if args.show else
+                             CALIBRATION_ACTION if args.calibrate else None)
     if not action:
         raise ValueError("--action: name the action (e.g. wave)")
     if args.name:
@@ -374,13 +413,18 @@ def _record(args) -> int:
         calibration = {key: info[key] for key in ("camera_matrix", "dist_coeffs",
                                                   "marker_length", "units", "frame_size")
                        if info.get(key) is not None}
-        extra = {"show": True} if args.show else {"preview": str(preview) if preview else None}
+        extra = {"show": True} if args.show else \
+            {CALIBRATION_KEY: {"rest_seconds": REST_SECONDS}} if args.calibrate else \
+            {"preview": str(preview) if preview else None}
         recorder = store.record(performer=args.performer, action=action,
                                 channels=source.channels or None, motion=motion,
                                 rate=args.rate, device=args.source, device_info=info,
                                 calibration=calibration, stream_rate=source.rate,
                                 name=args.name, start=start, extra=extra)
         length = f"for {duration:.2f} s" if duration is not None else "until Ctrl-C"
+        if args.calibrate:
+            print(f"  hold still in your rest pose for {REST_SECONDS:g} s, then move every "
+                  f"channel through its whole range until the end", flush=True)
         print(f"  GO - recording {recorder.name} {length}", flush=True)
         _capture(source, recorder, start, duration, action)
         stats = source.stats
@@ -419,6 +463,10 @@ def _record(args) -> int:
           f"({take.times[-1] - take.times[0]:.2f} s), {count(len(take.channels), 'channel')}, "
           f"{count(missing, 'missing value')}, {stats.malformed} malformed inputs skipped, "
           f"{stats.dropped} dropped -> {store.file(name)}")
+    if args.calibrate:
+        for line in calibration_report(take):
+            print(line)
+        return 0
     if motion is None:
         print(f"a show take: replay it with `mop perform SESSION --replay "
               f"{args.performer}=replay:{store.file(name)}`")

@@ -146,6 +146,38 @@ def performer_templates(config: SessionConfig, performer: PerformerConfig,
     return templates, tuple(channels), shift, scale
 
 
+def performer_calibration(config: SessionConfig, performer: PerformerConfig, store,
+                          channels: tuple[str, ...], *, where: str):
+    """The `followers.calibration.ChannelMap` from the performer's calibration take onto the
+    author's (the reference: `calibration_reference`, or the newest calibration take of the
+    performer who recorded the performer's first action take), or None when the performer
+    names no calibration take."""
+    if performer.calibration is None:
+        return None
+    from followers.calibration import calibrate
+    from mop.takes import TakeError, calibration_of, newest_calibration
+    key = f"{where}: performers.{performer.name}."
+    reference = performer.calibration_reference
+    if reference is None:
+        first = config.actions_of(performer.name)[0].demonstrations[0]
+        author = store.load(first).performer
+        reference = newest_calibration(store, author, channels)
+        if reference is None:
+            raise SessionError(f"{key}calibration: the author {author!r} (who recorded take "
+                               f"{first!r}) has no calibration take with channels "
+                               f"{', '.join(channels)} to map onto; record one with `mop "
+                               f"record --calibrate --performer {author} --source ...` or name "
+                               f"it in calibration_reference")
+    measured = {}
+    for field_name, name in (("calibration", performer.calibration),
+                             ("calibration_reference", reference)):
+        try:
+            measured[field_name] = calibration_of(store.load(name), channels)
+        except (TakeError, KeyError, OSError) as error:
+            raise SessionError(f"{key}{field_name}: {error}") from None
+    return calibrate(measured["calibration"], measured["calibration_reference"])
+
+
 def build_bank(templates: Mapping[str, np.ndarray], performer: PerformerConfig,
                fps: float | None = None):
     """The performer's bank; with ``fps``, input still for the performer's ``still_after``
@@ -236,6 +268,12 @@ def build_session(config: SessionConfig, *, mode: Mode | str = Mode.REPLAY,
         say(f"training the followers of {performer.name}")
         templates, channels, shift, scale = performer_templates(config, performer, takes,
                                                                 where=where)
+        mapped = performer_calibration(config, performer, store, channels, where=where)
+        if mapped is not None:
+            # the performer's input onto the author's range and rest, inside the normalisation
+            shift, scale = mapped.fold(shift, scale)
+            for note in mapped.notes:
+                say(f"calibration of {performer.name}: {note}")
         bank = build_bank(templates, performer, config.fps)
         spec = overrides.replay.get(performer.name, performer.source)
         feed = _feed(spec, performer, store, config, mode=mode, loop=overrides.loop_takes,

@@ -85,6 +85,8 @@ class PerformerConfig:
     stale_after: float = 0.5
     latency: float = 0.05
     still_after: float = 0.4
+    calibration: str | None = None
+    calibration_reference: str | None = None
 
 
 @dataclass(frozen=True)
@@ -388,7 +390,9 @@ def _parse_performers(top: _Reader, defaults: dict, base: Path) -> list[Performe
             window=int(window) if window else None,
             stale_after=float(entry.number("stale_after", low=0.01, high=60.0)),
             latency=float(entry.number("latency", low=0.0, high=1.0)),
-            still_after=float(entry.number("still_after", low=0.0, high=60.0))))
+            still_after=float(entry.number("still_after", low=0.0, high=60.0)),
+            calibration=entry.string("calibration"),
+            calibration_reference=entry.string("calibration_reference")))
 
     return performers
 

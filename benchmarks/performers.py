@@ -141,13 +141,11 @@ def recognition(args):
             f"{verdict(all(g >= t for g, t in zip(got, target)))})")
 
 
-def calibration_take(takes, rate):
-    """A calibration take made of real recordings: the rest pose (the takes' median first
-    frame, held 2 s), then the takes one after another (the range)."""
-    rest = np.median(np.array([t[0] for t in takes]), axis=0)
+def calibration_take(rest, takes, rate):
+    """A calibration take: the rest pose ``rest`` (D,) held 2 s, then real takes one after
+    another (the range)."""
     hold = np.repeat(rest[None, :], int(2 * rate) + 1, axis=0)
-    values = np.vstack([hold, *takes])
-    return measure(values, rate=rate)
+    return measure(np.vstack([hold, *takes]), rate=rate)
 
 
 class Stranger:
@@ -166,29 +164,33 @@ class Stranger:
 
 def calibrated_accuracy(data, rate, differences, performers, seed):
     """{(gain, offset): (as recorded, another performer, calibrated) accuracy [%] after 25 /
-    50 / 100 %}. Bank: 5 train takes per class; the author's calibration take from one train
-    take per class; each performer's from one of its test takes per class, scored on its
+    50 / 100 %}. Bank: 5 train takes per class. The rest pose is the train takes' median first
+    frame (the performer's: that pose as they differ); the range, one train take per class for
+    the author, one of the performer's test takes per class for them, who is scored on their
     other test takes."""
     X, y, Xt, yt = data
     classes = classes_of(y)
     demos = draw(X, y, classes, 5, None)
     bank, normaliser = bank_of(demos)
-    author = calibration_take([demos[c][0] for c in classes], rate)
+    rest = np.median([t[0] for takes in demos.values() for t in takes], axis=0)
+    author = calibration_take(rest, [demos[c][0] for c in classes], rate)
     flat = np.vstack([t for takes in demos.values() for t in takes])
     centre, spread = flat.mean(axis=0), flat.std(axis=0)
     rng = np.random.default_rng(seed)
+    plain = [recognised(bank, classes, normaliser(x), label) for x, label in zip(Xt, yt)]
     out = {}
     for gain, offset in differences:
         rows = {"as recorded": [], "another performer": [], "calibrated": []}
         for _ in range(performers):
             stranger = Stranger(centre, spread, rng, gain, offset)
             own = [rng.choice(np.flatnonzero(yt == c)) for c in classes]
-            mine = calibration_take([stranger(Xt[i]) for i in own], rate)
+            mine = calibration_take(stranger(rest), [stranger(Xt[i]) for i in own], rate)
             mapped = calibrate(mine, author)
             for i, (x, label) in enumerate(zip(Xt, yt)):
                 if i in own:
                     continue
-                for key, values in (("as recorded", x), ("another performer", stranger(x)),
+                rows["as recorded"].append(plain[i])
+                for key, values in (("another performer", stranger(x)),
                                     ("calibrated", mapped(stranger(x)))):
                     rows[key].append(recognised(bank, classes, normaliser(values), label))
         out[(gain, offset)] = {k: 100 * np.mean(v, axis=0) for k, v in rows.items()}

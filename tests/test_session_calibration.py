@@ -69,6 +69,8 @@ def test_a_recorded_calibration_maps_another_performer_onto_the_author(tmp_path,
     take = store.load("alice-calibration-001")
     assert is_calibration(take) and take.motion is None and take.action == "calibration"
     assert take.times.size >= 0.9 * len(author)
+    assert main(["takes", "--recordings", str(folder), "show", "alice-calibration-001"]) == 0
+    assert "a calibration take: the rest pose" in capsys.readouterr().out
     measured = calibration_of(take)
     np.testing.assert_allclose(measured.rest, another_performer(show.values[0]), atol=1e-9)
     # not a demonstration: `mop record`'s templates and the consistency report skip it

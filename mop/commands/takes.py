@@ -83,7 +83,7 @@ def _list(store, args) -> int:
 def _show(store, args) -> int:
     import numpy as np
 
-    from mop.takes import TakeError
+    from mop.takes import TakeError, calibration_of, is_calibration
 
     from . import count
     try:
@@ -124,6 +124,16 @@ def _show(store, args) -> int:
     if take.motion is not None:
         print(f"  motion      {count(len(take.motion.channel_names), 'channel')}, "
               f"{take.motion.duration:.3f} s: {', '.join(take.motion.channel_names)}")
+    elif is_calibration(take):
+        print("  motion      none (a calibration take: the rest pose, then every channel's "
+              "range)")
+        try:
+            measured = calibration_of(take)
+            for name, rest, low, high in zip(measured.channels, measured.rest, measured.low,
+                                             measured.high):
+                print(f"      {name:<18} rest {rest:>10.4g}  range {low:>10.4g} .. {high:.4g}")
+        except TakeError as error:
+            print(f"  problem     {error}")
     else:
         print("  motion      none (a show take: a performance, not a demonstration)")
     if take.alignment:

@@ -12,6 +12,9 @@ still there:
 - otherwise the action is replaced at its end (progress >= ``end_fraction``), in its
   still lead-in (where every recording starts before the gesture does), and wherever its
   template is not still itself; a pause inside a gesture, still in the template too, stays.
+  The template's own stillness is judged over a window ``SLOWEST`` times as long as the
+  input's: a performer at half the demonstration's tempo stays twice as long at a turning
+  point (the top of a slow chomp) that the template passes in a moment.
 
 The rule only changes what the bank *shows*: the followers, the posterior and the rejection
 go on underneath, so the action comes back as soon as the input moves again and explains it.
@@ -27,6 +30,8 @@ from numpy.lib.stride_tricks import sliding_window_view
 STILL_ACTION_SHARE = 0.5
 # the lead-in is protected up to this much progress past its last still frame
 LEAD_MARGIN = 0.02
+# performers down to this fraction of the demonstration's tempo (the followers' design range)
+SLOWEST = 0.5
 
 
 class StillModel(NamedTuple):
@@ -67,7 +72,8 @@ def build_still(templates: list[np.ndarray], takes: list[list[np.ndarray]], fram
     masks, lead = [], []
     for template in templates:
         mask = still_mask(template, frames, widths)
-        masks.append(mask)
+        masks.append(still_mask(template, max(int(round(SLOWEST * frames)), 2), widths)
+                     if frames > 0 else mask)
         leading = mask.copy()
         leading[:max(frames - 1, 0)] = True
         first_moving = int(np.argmin(leading)) if not leading.all() else len(leading)

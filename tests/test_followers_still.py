@@ -3,7 +3,7 @@ stretches are known)."""
 import numpy as np
 import pytest
 
-from followers import BankConfig, FollowerBank
+from followers import BankConfig, FollowerBank, time_warp
 from followers.still import still_mask
 
 NOISE = 0.01
@@ -88,3 +88,21 @@ def test_still_settings_are_checked():
         BankConfig(still_frames=-1)
     with pytest.raises(TypeError, match="still_frames must be an int"):
         BankConfig(still_frames=2.5)
+
+
+@pytest.mark.parametrize("speed", [0.8, 0.6, 0.5])
+def test_a_slow_turning_point_is_not_taken_for_a_stop(rng, speed):
+    """A jaw opening and closing (one channel) performed slower than demonstrated stays at its
+    top for longer than the still window, while the template passes it in a moment: the shown
+    action must stay there."""
+    t = np.arange(50) / 49
+    chomp = np.stack([0.5 - 0.5 * np.cos(2 * np.pi * t), np.zeros(50)], axis=1)
+    tilt = np.stack([np.zeros(50), np.sin(2 * np.pi * t)], axis=1)
+    bank = FollowerBank({"chomp": noisy(chomp, rng), "tilt": noisy(tilt, rng)},
+                        config=BankConfig(still_frames=10))
+    performance = noisy(time_warp(chomp, speed)[0], rng)
+    top = np.abs(performance[:, 0] - 1) < 0.1
+    assert still_mask(performance, 10, bank._still.band)[top].any()   # it is still there
+    action = bank.follow(performance)["action"]
+    middle = action[len(action) // 4: 3 * len(action) // 4]
+    assert np.all(middle == 0)

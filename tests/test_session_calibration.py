@@ -93,3 +93,19 @@ def test_a_recorded_calibration_maps_another_performer_onto_the_author(tmp_path,
     agree = np.mean(calibrated == truth)
     assert agree >= 0.95 and agree > np.mean(as_it_comes == truth) + 0.1
     assert main(["perform", str(path), "--duration", "1", "--no-render", "--quiet"]) == 0
+    # or from the command line, for whoever steps in at the show
+    plain = session_file(tmp_path, folder)
+    assert main(["perform", str(plain), "--calibration", "glove=alice-calibration-001",
+                 "--duration", "1", "--no-render", "--quiet"]) == 0
+    from mop.commands.perform import with_calibrations
+    config = with_calibrations(load_session(plain), ["glove=alice-calibration-001"])
+    session = build_session(config, mode=Mode.REPLAY, overrides=Overrides(render=False))
+    runtime = next(p for p in session.performers if p.name == "glove")
+    np.testing.assert_array_equal(runtime.shift, alice_shift)
+    capsys.readouterr()
+    assert main(["perform", str(plain), "--calibration", "alice=alice-calibration-001",
+                 "--duration", "1", "--no-render", "--quiet"]) == 1
+    assert "--calibration: no performer 'alice'" in capsys.readouterr().err
+    assert main(["perform", str(plain), "--calibration", "glove=glove_show", "--duration",
+                 "1", "--no-render", "--quiet"]) == 1
+    assert "'glove_show' is not a calibration take" in capsys.readouterr().err

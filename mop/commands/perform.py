@@ -23,6 +23,10 @@ def register(subparsers) -> None:
                              "PERFORMER=TAKE replays that take for that performer instead of "
                              "their source; without pairs every performer must already be "
                              "a replay: source")
+    parser.add_argument("--calibration", nargs="+", metavar="PERFORMER=TAKE", default=(),
+                        help="who performs now: map PERFORMER's input onto the author's with "
+                             "their calibration take (mop record --calibrate), as the "
+                             "session's calibration = TAKE does")
     parser.add_argument("--realtime", action="store_true",
                         help="keep real time even when every performer is replayed")
     parser.add_argument("--loop", action="store_true",
@@ -50,6 +54,26 @@ def register(subparsers) -> None:
                              f"(default {MAX_FRAMES:,}, an hour at 25 fps)")
     parser.add_argument("--quiet", action="store_true", help="no progress lines")
     parser.set_defaults(func=run)
+
+
+def with_calibrations(config, pairs):
+    """The session with each PERFORMER=TAKE of ``pairs`` as that performer's calibration."""
+    import dataclasses
+    chosen = {}
+    for pair in pairs:
+        performer, sep, take = pair.partition("=")
+        if not sep or not performer or not take:
+            raise ValueError(f"--calibration expects PERFORMER=TAKE, got {pair!r}")
+        chosen[performer] = take
+    names = [p.name for p in config.performers]
+    for performer in chosen:
+        if performer not in names:
+            raise ValueError(f"--calibration: no performer {performer!r} in {config.path}; "
+                             f"the session has {', '.join(names)}")
+    performers = type(config.performers)(
+        dataclasses.replace(p, calibration=chosen[p.name]) if p.name in chosen else p
+        for p in config.performers)
+    return dataclasses.replace(config, performers=performers)
 
 
 def parse_replay(pairs) -> dict[str, str]:
@@ -126,7 +150,7 @@ def run(args) -> int:
     from mop.session.build import Overrides
     from mop.session.config import REPLAY_PREFIX, parse_host_port
 
-    config = load_session(args.session)
+    config = with_calibrations(load_session(args.session), args.calibration)
     replay = parse_replay(args.replay)
     names = [p.name for p in config.performers]
     for performer in replay:

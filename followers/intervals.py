@@ -13,8 +13,10 @@ position, divided by the emission sigma there, is averaged over channels; an exp
 window (``FollowerConfig.residual_memory`` frames; each residual clipped at
 ``outlier_sigmas``) estimates its lag-one autocorrelation
 ``rho``; the variance is multiplied by ``(1 + rho) / (1 - rho)`` (the variance of a mean of
-AR(1) samples against independent ones), at most ``residual_cap``. Independent residuals
-(``rho`` near 0, the demonstration replayed) leave the interval as it was.
+AR(1) samples against independent ones) and by the residual's mean square where it exceeds 1
+(a performer further from the template than its sigma says), at most ``residual_cap``.
+Independent residuals within the sigma (the demonstration replayed) leave the interval as it
+was.
 """
 from __future__ import annotations
 
@@ -44,7 +46,7 @@ def reset_interval(state: np.ndarray) -> None:
 
 @nb.njit(cache=True)
 def widen(templates, sigmas, offsets, which, X, progress, variance, memory, cap, clip, state):
-    """Multiply ``variance (N,)`` in place by each frame's correlation factor.
+    """Multiply ``variance (N,)`` in place by each frame's correlation and fit factor.
 
     templates, sigmas : (sum T_k, D) the followers' templates and sigmas stacked;
     offsets, lengths implied: template ``k`` is rows ``offsets[k]:offsets[k + 1]``;
@@ -84,7 +86,7 @@ def widen(templates, sigmas, offsets, which, X, progress, variance, memory, cap,
             state[0] = decay * state[0] + (1.0 - decay) * lag1 / seen
             state[1] = decay * state[1] + (1.0 - decay) * lag0 / seen
         rho = min(max(state[0] / state[1], 0.0), RHO_MAX)
-        variance[n] *= min(cap, (1.0 + rho) / (1.0 - rho))
+        variance[n] *= min(cap, (1.0 + rho) / (1.0 - rho) * max(1.0, state[1]))
 
 
 def stacked(templates, sigmas):

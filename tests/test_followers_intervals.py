@@ -1,4 +1,5 @@
-"""Progress intervals widened by the residual's autocorrelation (followers.intervals)."""
+"""Progress intervals widened by the residual's autocorrelation and fit
+(followers.intervals)."""
 import math
 
 import numpy as np
@@ -28,7 +29,7 @@ def slow_widen(template, sigma, X, progress, variance, memory, cap, clip):
             lag0 = decay * lag0 + (1 - decay) * float(np.sum(r * r)) / seen.sum()
         previous = r
         rho = min(max(lag1 / lag0, 0.0), 0.95)
-        out[n] *= min(cap, (1 + rho) / (1 - rho))
+        out[n] *= min(cap, (1 + rho) / (1 - rho) * max(1.0, lag0))
     return out
 
 
@@ -47,6 +48,16 @@ def test_widen_is_the_plain_rule(rng):
           20.0, 5.0, interval_state(3))
     np.testing.assert_allclose(got, expected, rtol=1e-12)
     assert (got > 2 * variance).mean() > 0.5  # a random-walk residual is correlated
+
+
+def test_independent_residuals_beyond_the_sigma_widen_by_their_mean_square(rng):
+    template = np.sin(np.linspace(0, 6, 200))[:, None] * np.ones((1, 2))
+    sigma = np.full((200, 2), 0.1)
+    X = template + rng.normal(scale=0.3, size=(200, 2))      # 3 sigmas: 9x the variance
+    variance = np.full(200, 1e-4)
+    widen(*stacked([template], [sigma]), np.zeros(200, dtype=np.int64), X,
+          np.linspace(0, 1, 200), variance, 20.0, 20.0, 5.0, interval_state(2))
+    assert 5e-4 < np.median(variance[40:]) < 1.3e-3
 
 
 def test_independent_residuals_leave_the_interval_alone(rng):

@@ -509,3 +509,67 @@ def test_video_output_repeats_a_dropped_picture_without_converting_it_again(tmp_
     assert len(read) == len(writes)
     for frame, (picture, _) in zip(read, writes):
         assert np.array_equal(frame, over_colour(pictures[picture], (16, 32, 48)))
+
+
+class GatedRenderer:
+    """Draws a blank layer; every render after the first `free` ones waits until the file
+    `gate` exists (a test holds the pictures back for as long as it likes, in a thread or a
+    process)."""
+
+    def __init__(self, gate, free=0):
+        self.gate, self.free, self.renders = str(gate), free, 0
+
+    def render(self, puppet):
+        import os
+        import time
+        self.renders += 1
+        deadline = time.monotonic() + 60.0
+        while self.renders > self.free and not os.path.exists(self.gate):
+            if time.monotonic() > deadline:
+                break
+            time.sleep(0.01)
+        return np.zeros((8, 8, 4), np.uint8)
+
+
+@pytest.mark.parametrize("kind", ["thread", "process"])
+def test_replay_runs_ahead_of_its_pictures_and_draws_every_frame_in_order(tmp_path, kind):
+    """Lossless pictures do not hold the loop frame by frame: while the first picture is being
+    drawn the loop hands over the next SLOTS - 1 frames and goes on; only then does it wait.
+    Every frame is drawn, none repeated, in order."""
+    import threading
+
+    from mop.session.loop import CharacterRuntime
+    from mop.session.worker import SLOTS, RenderProcess, RenderWorker
+    from session_standin import StripPuppet
+    gate = tmp_path / "gate"
+    # the render process draws once at rest before it says ready: that one is let through
+    renderer = GatedRenderer(gate, free=0 if kind == "thread" else 1)
+    character = CharacterRuntime("c", StripPuppet(("tip",)), renderer)
+    recorder = Recorder()
+    worker = (RenderWorker if kind == "thread" else RenderProcess)(
+        Stage((16, 16), (0, 0, 0)), [character], [recorder], lossless=True)
+    worker.start()
+    worker.wait_ready()
+    frames, handed = SLOTS + 3, []
+
+    def loop():
+        for index in range(frames):
+            character.puppet.state.x[-1, 1] = index       # each frame's surface differs
+            worker.submit(index, {"frame": index})
+            handed.append(index)
+
+    try:
+        thread = threading.Thread(target=loop, daemon=True)
+        thread.start()
+        thread.join(5.0)                                  # the loop blocks once slots run out
+        ahead = len(handed)
+        assert ahead == SLOTS, ahead
+        gate.touch()
+        thread.join(30.0)
+        assert len(handed) == frames
+    finally:
+        gate.touch()
+        worker.finish(frames)
+    assert [(index, repeat) for index, repeat, _ in recorder.written] == [
+        (k, False) for k in range(frames)]
+    assert worker.rendered == frames and worker.repeated == 0

@@ -8,16 +8,20 @@ output (video, PNG, the preview's JPEG) - one write per session frame, in order.
 - Live: the newest snapshot wins. When a render is slower than a frame, the snapshots the
   worker never got to are written as repeats of the last picture, so a video always has one
   frame per session frame (the show's duration) and the loop never waits for pictures.
-- Lossless (replay): every snapshot is drawn; the loop waits when the worker is a frame behind,
-  so the same takes give the same pictures.
+- Lossless (replay): every snapshot is drawn, in order, so the same takes give the same
+  pictures. The loop runs up to SLOTS - 1 frames ahead of the pictures and waits only when
+  every slot is taken: loop and pictures overlap on two cores, and the show takes as long as
+  the slower of the two, not their sum.
 
 Two workers with the same behaviour:
 
 - `RenderProcess` (the default): a process of its own, which rebuilds the layer renderers
   (`renderer.recipe()`, or the renderer itself pickled) and the frame outputs
   (`output.recipe()`) and reads the surfaces from shared memory. Measured on two cores, a
-  render thread doubles the loop's simulation time (pyrender's Python holds the GIL, and the
-  loop's compiled kernels wait for it at every call); a process does not touch it. Outputs
+  render thread doubles the loop's simulation time (moderngl holds the GIL while it draws and
+  reads back, and the loop's compiled kernels wait for it at every call); a process does not
+  touch it. Live, it runs at a lower priority (nice +10: the loop wins a shared core); a
+  replay's render process keeps the session's priority (its pictures are the output). Outputs
   without a recipe (yours) still get every frame, in the session's process, from shared
   memory.
 - `RenderWorker`: a thread, for renderers that cannot be rebuilt elsewhere (the 3D layers' GL
@@ -37,7 +41,7 @@ import numpy as np
 log = logging.getLogger(__name__)
 
 STATE_RING = 1024   # states kept for frames written as repeats
-SLOTS = 3           # snapshots: one being drawn, one waiting, one being filled
+SLOTS = 4           # snapshots: one being drawn, one being filled, the others waiting
 FRAME_SLOTS = 4     # composed frames on their way back to the session's own outputs
 RENDER_NICE = 10    # the render process's nice increment: the loop wins a shared core
 
@@ -170,7 +174,7 @@ class RenderWorker:
         self._frozen = [[FrozenPuppet(c.puppet, s) for c, s in zip(self.characters, slot)]
                         for slot in self._surfaces]
         self._free = list(range(SLOTS))
-        self._pending: tuple[int, int] | None = None       # (slot, frame index)
+        self._pending: list[tuple[int, int]] = []          # (slot, frame index), oldest first
         self._states = _States()
         self._condition = threading.Condition()
         self._stopping = False
@@ -197,24 +201,24 @@ class RenderWorker:
 
     def submit(self, index: int, state: dict | None) -> None:
         """Hand over frame `index` (copies the surfaces now). Live: never waits; a snapshot
-        not yet taken is replaced. Lossless: waits while the previous one is not taken."""
+        not yet taken is replaced. Lossless: queued; waits only while every slot is taken."""
         if self.error is not None:
             raise self.error
         with self._condition:
             self._states.put(index, state)
             if self.lossless:
-                while self._pending is not None and self.error is None:
+                while not self._free and self.error is None:
                     self._condition.wait(0.5)
                 if self.error is not None:
                     raise self.error
-            elif self._pending is not None:        # live: the worker never got to it
-                self._free.append(self._pending[0])
-                self._pending = None
+            elif self._pending:                    # live: the worker never got to it
+                self._free.extend(slot for slot, _ in self._pending)
+                self._pending.clear()
             slot = self._free.pop()
         for surface, character in zip(self._surfaces[slot], self.characters):
             np.copyto(surface, character.puppet.surface())
         with self._condition:
-            self._pending = (slot, index)
+            self._pending.append((slot, index))
             self._condition.notify_all()
 
     def finish(self, frames: int) -> None:
@@ -235,9 +239,9 @@ class RenderWorker:
         try:
             while True:
                 with self._condition:
-                    while self._pending is None and not self._stopping:
+                    while not self._pending and not self._stopping:
                         self._condition.wait()
-                    taken, self._pending = self._pending, None
+                    taken = self._pending.pop(0) if self._pending else None
                     self._condition.notify_all()
                 if taken is None:
                     break
@@ -247,6 +251,7 @@ class RenderWorker:
                 finally:
                     with self._condition:
                         self._free.append(slot)
+                        self._condition.notify_all()
             self.pictures.repeat_until(self._end, self._states.get)
         except BaseException as error:  # re-raised in the loop's thread by submit / finish
             self.error = error
@@ -285,10 +290,10 @@ def _rebuild(spec):
     return spec
 
 
-# control block (shared integers): the waiting slot, the end, each slot's state and frame
-_PENDING, _END = 0, 1
-_STATE, _INDEX = 2, 2 + SLOTS
-_FRAME_STATE = 2 + 2 * SLOTS
+# control block (shared integers): the end, each slot's state and frame, each frame slot's state
+_END = 0
+_STATE, _INDEX = 1, 1 + SLOTS
+_FRAME_STATE = 1 + 2 * SLOTS
 _CONTROL = _FRAME_STATE + FRAME_SLOTS
 FREE, FILLING, WAITING, DRAWING = 0, 1, 2, 3
 
@@ -349,7 +354,6 @@ class RenderProcess:
             self._frames = np.ndarray((FRAME_SLOTS, height, width, 4), np.uint8, frames.buf)
         self._condition = context.Condition()
         self._control = context.RawArray("q", _CONTROL)
-        self._control[_PENDING] = -1
         self._control[_END] = -1
         ours, theirs = context.Pipe()
         self._pipe = ours
@@ -357,7 +361,7 @@ class RenderProcess:
                 "positions": [c.position for c in self.characters],
                 "rest": self._surfaces, "layout": layout, "snapshot_bytes": snapshot_bytes,
                 "surfaces": surfaces.name, "frames": None if frames is None else frames.name,
-                "outputs": [recipe for _, recipe in self._remote]}
+                "outputs": [recipe for _, recipe in self._remote], "lossless": self.lossless}
         self._process = context.Process(target=_child, name="mop-render",
                                         args=(spec, theirs, self._condition, self._control),
                                         daemon=True)
@@ -388,31 +392,31 @@ class RenderProcess:
 
     def submit(self, index: int, state: dict | None) -> None:
         """Hand over frame `index` (copies the surfaces into shared memory now). Live: never
-        waits; a snapshot not yet taken is replaced. Lossless: waits while the previous one
-        is not taken."""
+        waits; a snapshot not yet taken is replaced. Lossless: queued; waits only while every
+        slot is taken."""
         if self.error is not None:
             raise self.error
         control = self._control
         with self._condition:
             self._states.put(index, state)
             if self.lossless:
-                while control[_PENDING] != -1:
+                while _slot_in(control, FREE) == -1:
                     self._condition.wait(0.5)
                     if self.error is not None:
                         raise self.error
                     if not self._process.is_alive():
                         self._dead("during the show")
-            elif control[_PENDING] != -1:          # live: the worker never got to it
-                control[_STATE + control[_PENDING]] = FREE
-                control[_PENDING] = -1
-            slot = next(k for k in range(SLOTS) if control[_STATE + k] == FREE)
+            else:                                  # live: a snapshot not yet taken goes
+                waiting = _slot_in(control, WAITING)
+                if waiting != -1:
+                    control[_STATE + waiting] = FREE
+            slot = _slot_in(control, FREE)
             control[_STATE + slot] = FILLING
         for view, character in zip(self._views[slot], self.characters):
             np.copyto(view, character.puppet.surface())
         with self._condition:
             control[_INDEX + slot] = index
             control[_STATE + slot] = WAITING
-            control[_PENDING] = slot
             self._condition.notify_all()
 
     def finish(self, frames: int) -> None:
@@ -498,6 +502,17 @@ class RenderProcess:
                 self._condition.notify_all()
 
 
+def _slot_in(control, state: int) -> int:
+    """The snapshot slot in `state` holding the earliest frame, or -1 (call it holding the
+    condition)."""
+    found = -1
+    for slot in range(SLOTS):
+        if control[_STATE + slot] == state and (
+                found == -1 or control[_INDEX + slot] < control[_INDEX + found]):
+            found = slot
+    return found
+
+
 def _slot_views(buffer, layout, snapshot_bytes) -> list[list[np.ndarray]]:
     """[slot][character] (V, d) float64 views into the shared surfaces."""
     views = []
@@ -540,7 +555,8 @@ def _child(spec, pipe, condition, control) -> None:
     memories: list = []
     outputs: list = []
     try:
-        _lower_priority()
+        if not spec["lossless"]:
+            _lower_priority()
         pictures, frozen, timings = _build_child(spec, pipe, condition, control, memories,
                                                  outputs)
         pipe.send(("ready",))
@@ -636,14 +652,13 @@ def _draw_until_the_end(pictures, frozen, timings, pipe, condition, control) -> 
 
     while True:
         with condition:
-            while control[_PENDING] == -1 and control[_END] == -1:
+            while _slot_in(control, WAITING) == -1 and control[_END] == -1:
                 condition.wait(1.0)
                 if os.getppid() != parent:
                     return                   # the session is gone
-            slot = control[_PENDING]
+            slot = _slot_in(control, WAITING)
             if slot == -1:
                 break
-            control[_PENDING] = -1
             control[_STATE + slot] = DRAWING
             index = control[_INDEX + slot]
             condition.notify_all()

@@ -1,6 +1,7 @@
 """A performer's calibration take end to end: `mop record --calibrate` from a replayed source
 into the take folder (SQLite), read back, and a session whose performer names it follows that
 performer's input as the author's."""
+import re
 import shutil
 
 import numpy as np
@@ -66,6 +67,13 @@ def test_a_recorded_calibration_maps_another_performer_onto_the_author(tmp_path,
         out = capsys.readouterr().out
         assert f"calibration of {performer}: rest and range" in out
         assert f'calibration = "{performer}-calibration-001"' in out
+    # alice's take said how she differs from the glove's author, per finger
+    gains = re.search(r"onto glove \(glove-calibration-001\): gain (.*)", out).group(1)
+    np.testing.assert_allclose([float(g.split()[1]) for g in gains.split(", ")], 1 / GAIN,
+                               atol=0.01)
+    assert main(["record", "--performer", "alice", "--calibrate", "--action", "wave",
+                 "--source", "replay:x", "--recordings", str(folder)]) == 1
+    assert "--calibrate records the take of action 'calibration'" in capsys.readouterr().err
     take = store.load("alice-calibration-001")
     assert is_calibration(take) and take.motion is None and take.action == "calibration"
     assert take.times.size >= 0.9 * len(author)

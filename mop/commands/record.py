@@ -212,9 +212,11 @@ def confusability_report(templates: dict, new_name: str) -> list[str]:
     return lines
 
 
-def calibration_report(take) -> list[str]:
-    """What a calibration take measured, per channel, and how to use it."""
-    from mop.takes import calibration_of
+def calibration_report(take, store=None) -> list[str]:
+    """What a calibration take measured, per channel, against the newest calibration of each
+    other performer in ``store`` with those channels, and how to use it."""
+    from followers.calibration import calibrate
+    from mop.takes import calibration_of, newest_calibration
     measured = calibration_of(take)
     lines = [f"calibration of {take.performer}: rest and range (2nd-98th percentile) per "
              f"channel"]
@@ -223,6 +225,15 @@ def calibration_report(take) -> list[str]:
         still = "  (did not move: only its rest will be matched)" if not high > low else ""
         lines.append(f"  {name:<24} rest {rest:10.4g}   range {low:10.4g} .. {high:<10.4g}"
                      f"{still}")
+    others = sorted({info.performer for info in store.list()} - {take.performer}) \
+        if store is not None else []
+    for other in others:
+        name = newest_calibration(store, other, take.channels)
+        if name is None:
+            continue
+        mapped = calibrate(measured, calibration_of(store.load(name), take.channels))
+        lines.append(f"  onto {other} ({name}): gain " + ", ".join(
+            f"{c} {g:.2f}" for c, g in zip(take.channels, mapped.gain)))
     lines.append(f"use it in a session: [performers.NAME] calibration = \"{take.name}\" (the "
                  f"author records one too, with the same channels)")
     return lines
@@ -288,6 +299,10 @@ def _plan(args, store) -> tuple:
     if args.show and args.calibrate:
         raise ValueError("--show and --calibrate are two kinds of take: give one")
     if args.calibrate:
+        from mop.takes import CALIBRATION_ACTION
+        if args.action not in (None, CALIBRATION_ACTION):
+            raise ValueError(f"--calibrate records the take of action "
+                             f"{CALIBRATION_ACTION!r}: leave out --action")
         if args.motion is not None:
             raise ValueError("--calibrate records the rest pose and the range without a motion: "
                              "leave out --motion")
@@ -464,7 +479,7 @@ def _record(args) -> int:
           f"{count(missing, 'missing value')}, {stats.malformed} malformed inputs skipped, "
           f"{stats.dropped} dropped -> {store.file(name)}")
     if args.calibrate:
-        for line in calibration_report(take):
+        for line in calibration_report(take, store):
             print(line)
         return 0
     if motion is None:

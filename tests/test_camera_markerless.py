@@ -297,3 +297,18 @@ def test_the_webcam_sessions_face_is_followed_through_its_show():
             assert late and set(late) <= {f"face_{action}", None}, (action, start, late)
             assert late.count(f"face_{action}") >= 0.8 * len(late), (action, start, late)
         start += length
+
+
+def test_trackers_start_and_restart_without_writing_to_the_terminal(capfd):
+    # MediaPipe writes C++ log lines to fd 2 whenever a graph starts (about 75 in a benchmark
+    # run); the trackers send them to logging (see native_notices)
+    from capture.camera.trackers import make_tracker
+    blank = np.full((H, W, 3), 90, np.uint8)
+    capfd.readouterr()
+    for name in ("face", "hands", "pose"):
+        tracker = make_tracker(name)
+        tracker.process(blank)
+        tracker.reset()
+        tracker.process(blank)
+        tracker.close()
+    assert capfd.readouterr().err == ""

@@ -4,6 +4,7 @@ known pose path, colour blobs along known paths, a face (a real photograph shipp
 matplotlib) moved along a known path for the Haar tracker, and hand silhouettes opened step by
 step, checked against a slow reference computed from the drawn mask."""
 import math
+import os
 import sys
 import time
 
@@ -324,3 +325,38 @@ def test_markerless_trackers_without_mediapipe_name_the_extra(tmp_path, monkeypa
     out = capsys.readouterr().out
     assert "face        face: mouth" in out and "models NOT installed" in out
     assert "haar" in out and "ready (OpenCV)" in out
+
+
+def test_mediapipe_start_up_lines_are_logged_and_errors_still_reach_stderr(capfd, caplog):
+    # what MediaPipe's C++ side writes to fd 2 while a graph starts, written the same way
+    from capture.camera.markerless import native_notices
+    lines = [
+        "INFO: Created TensorFlow Lite XNNPACK delegate for CPU.",
+        "W0000 00:00:1795712407.823030   23025 inference_feedback_manager.cc:114] Feedback "
+        "manager requires a model with a single signature inference. Disabling support.",
+        "I0000 00:00:1795712407.9   23025 gl_context.cc:357] a line nobody listed",
+        "W0000 00:00:1795712407.9   23025 calculator_graph.cc:12] an unexpected warning",
+        "E0000 00:00:1795712407.9   23025 calculator_graph.cc:99] a real error",
+        "another thread's output, not MediaPipe's",
+    ]
+    capfd.readouterr()
+    with caplog.at_level("DEBUG", logger="capture.camera.markerless"):
+        with native_notices():
+            with native_notices():              # nested in one thread: one redirection
+                os.write(2, "\n".join(lines[:3]).encode() + b"\n")
+            os.write(2, "\n".join(lines[3:]).encode() + b"\n")
+    err = capfd.readouterr().err
+    assert err == f"{lines[4]}\n{lines[5]}\n"          # errors and the rest, as written
+    logged = {(r.levelname, r.getMessage()) for r in caplog.records}
+    assert ("DEBUG", f"MediaPipe: {lines[0]}") in logged
+    assert ("INFO", "MediaPipe: a line nobody listed") in logged
+    assert ("WARNING", "MediaPipe: an unexpected warning") in logged
+    assert not any("real error" in message for _, message in logged)
+    os.write(2, b"after\n")                             # fd 2 is the terminal's again
+    assert capfd.readouterr().err == "after\n"
+    # an exception inside still puts fd 2 back, and what was written is not lost
+    with pytest.raises(RuntimeError):
+        with native_notices():
+            os.write(2, b"E0000 00:00:1.0 1 x.cc:1] failed\n")
+            raise RuntimeError("graph failed")
+    assert capfd.readouterr().err == "E0000 00:00:1.0 1 x.cc:1] failed\n"

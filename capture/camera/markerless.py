@@ -17,10 +17,16 @@ it loses them): one tracker per source, called from one thread.
 """
 from __future__ import annotations
 
+import contextlib
 import importlib.metadata
 import importlib.util
 import logging
 import math
+import os
+import re
+import sys
+import tempfile
+import threading
 from pathlib import Path
 
 import numpy as np
@@ -47,6 +53,65 @@ MODELS = {
     "pose": ("pose_detection/pose_detection.tflite",
              "pose_landmark/pose_landmark_full.tflite"),
 }
+
+
+# what MediaPipe's C++ side writes to fd 2 when a graph starts: absl log lines ("W0000
+# 00:00:... file.cc:114] text"), TensorFlow Lite's "INFO: ..." and absl's own notice
+_ABSL_LINE = re.compile(r"^([IWEF])\d{4} [\d:. ]+\d+ [\w.]+:\d+\] (.*)$")
+_NOTICES = ("Feedback manager requires a model with a single signature",
+            "Created TensorFlow Lite XNNPACK delegate",
+            "All log messages before absl::InitializeLog() is called",
+            "Using NORM_RECT without IMAGE_DIMENSIONS")
+_STDERR = threading.Lock()
+_STDERR_OWNER: dict = {}        # the thread that has fd 2 redirected
+
+
+@contextlib.contextmanager
+def native_notices():
+    """While MediaPipe starts a graph, its C++ log lines go to this module's logger instead of
+    the terminal: the known start-up notices at DEBUG, other info and warning lines at INFO and
+    WARNING. Errors (E, F lines) and anything else written to stderr meanwhile (another
+    thread's output) are written to stderr afterwards, as they were.
+
+    fd 2 is the process's: it is redirected to a temporary file for the duration, one caller
+    at a time. MediaPipe's C++ logging has no switch of its own here (GLOG_minloglevel is not
+    read; absl's log level is set only by the program that links it)."""
+    if _STDERR_OWNER.get("thread") == threading.get_ident():
+        yield                         # already redirected, by this thread
+        return
+    with _STDERR:
+        _STDERR_OWNER["thread"] = threading.get_ident()
+        sys.stderr.flush()
+        saved = os.dup(2)
+        with tempfile.TemporaryFile() as sink:
+            os.dup2(sink.fileno(), 2)
+            try:
+                yield
+            finally:
+                sys.stderr.flush()
+                _STDERR_OWNER.clear()
+                os.dup2(saved, 2)
+                os.close(saved)
+                sink.seek(0)
+                passed = _route(sink.read().decode(errors="replace"))
+                if passed:
+                    os.write(2, passed.encode())
+
+
+def _route(text: str) -> str:
+    """Log MediaPipe's info and warning lines (see `native_notices`); returns the rest."""
+    rest = []
+    for line in text.splitlines(keepends=True):
+        match = _ABSL_LINE.match(line.rstrip("\n"))
+        message = match.group(2) if match else line.strip()
+        if any(notice in line for notice in _NOTICES):
+            log.debug("MediaPipe: %s", message)
+        elif match and match.group(1) in "IW":
+            log.log(logging.INFO if match.group(1) == "I" else logging.WARNING,
+                    "MediaPipe: %s", message)
+        else:
+            rest.append(line)
+    return "".join(rest)
 
 
 def _mediapipe():
@@ -133,10 +198,17 @@ class MediapipeTracker(Tracker):
         self.seen = False
 
     def _warm_up(self) -> None:
-        """One small blank frame through the model, then a reset: loading the model happens
-        here, when the source opens, not on the performer's first frame (about 0.1-0.2 s)."""
+        """One small blank frame through the model: loading the model happens here, when the
+        source opens, not on the performer's first frame (about 0.1-0.2 s). Nothing is in
+        the blank frame, so nothing is tracked after it."""
         self._solution.process(np.zeros((64, 64, 3), np.uint8))
-        self._solution.reset()
+
+    def _restart(self) -> None:
+        """MediaPipe's graph started afresh (nothing tracked), its models loaded by a blank
+        frame before this returns (they load in MediaPipe's threads, after the restart)."""
+        with native_notices():
+            self._solution.reset()
+            self._warm_up()
 
     def _rgb_of(self, image: np.ndarray) -> np.ndarray:
         cv2 = _cv2()
@@ -153,7 +225,7 @@ class MediapipeTracker(Tracker):
     def reset(self) -> None:
         """Forget what was tracked: the next frame is searched whole."""
         if self._solution is not None:
-            self._solution.reset()
+            self._restart()
         self.seen = False
 
     def close(self) -> None:
@@ -189,14 +261,16 @@ class FaceMeshTracker(MediapipeTracker):
         self.refine = bool(refine)
         self.far = bool(far)
         _, solutions = _mediapipe()
-        self._solution = self._mesh(solutions)
-        self._warm_up()
-        self._far_mesh = self._detector = None
-        if self.far:
-            self._far_mesh = self._mesh(solutions, static=True)
-            self._detector = solutions.face_detection.FaceDetection(
-                model_selection=1, min_detection_confidence=self.min_detection)
-            self._detector.process(np.zeros((64, 64, 3), np.uint8))
+        with native_notices():
+            self._solution = self._mesh(solutions)
+            self._warm_up()
+            self._far_mesh = self._detector = None
+            if self.far:
+                self._far_mesh = self._mesh(solutions, static=True)
+                self._far_mesh.process(np.zeros((64, 64, 3), np.uint8))
+                self._detector = solutions.face_detection.FaceDetection(
+                    model_selection=1, min_detection_confidence=self.min_detection)
+                self._detector.process(np.zeros((64, 64, 3), np.uint8))
         self._window: tuple[float, float, float] | None = None    # centre x, y, side [px]
         self._window_rgb = np.empty((self.WINDOW_PX, self.WINDOW_PX, 3), np.uint8)
         self._points: np.ndarray | None = None
@@ -281,7 +355,7 @@ class FaceMeshTracker(MediapipeTracker):
                     landmarks = self._track_far(rgb)
             self.found_far = landmarks is not None
             if self._window is None and landmarks is not None:
-                self._solution.reset()     # back to the whole frame: search it afresh
+                self._restart()            # back to the whole frame: search it afresh
         self.seen = landmarks is not None
         if not self.seen:
             return out
@@ -344,12 +418,13 @@ class HandsTracker(MediapipeTracker):
         self.scales = ((1.0,) * 6 + (0.2, 0.2, 1.0)) * 2
         super().__init__(min_detection=min_detection, min_tracking=min_tracking)
         _, solutions = _mediapipe()
-        self._solution = solutions.hands.Hands(
-            static_image_mode=False, max_num_hands=self.max_hands,
-            model_complexity=1 if model == "full" else 0,
-            min_detection_confidence=self.min_detection,
-            min_tracking_confidence=self.min_tracking)
-        self._warm_up()
+        with native_notices():
+            self._solution = solutions.hands.Hands(
+                static_image_mode=False, max_num_hands=self.max_hands,
+                model_complexity=1 if model == "full" else 0,
+                min_detection_confidence=self.min_detection,
+                min_tracking_confidence=self.min_tracking)
+            self._warm_up()
         self._last_wrist = {side: None for side in self.SIDES}
         self._image_points = np.empty((21, 3))
         self._world_points = np.empty((21, 3))
@@ -416,11 +491,12 @@ class PoseTracker(MediapipeTracker):
     def __init__(self, *, min_detection: float = 0.5, min_tracking: float = 0.5):
         super().__init__(min_detection=min_detection, min_tracking=min_tracking)
         _, solutions = _mediapipe()
-        self._solution = solutions.pose.Pose(
-            static_image_mode=False, model_complexity=1, smooth_landmarks=False,
-            enable_segmentation=False, min_detection_confidence=self.min_detection,
-            min_tracking_confidence=self.min_tracking)
-        self._warm_up()
+        with native_notices():
+            self._solution = solutions.pose.Pose(
+                static_image_mode=False, model_complexity=1, smooth_landmarks=False,
+                enable_segmentation=False, min_detection_confidence=self.min_detection,
+                min_tracking_confidence=self.min_tracking)
+            self._warm_up()
         self._image_points = np.empty((33, 3))
         self._visibility = np.empty(33)
         self._world_points = np.empty((33, 3))

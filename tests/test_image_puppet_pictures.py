@@ -39,6 +39,29 @@ def test_photo_on_a_background_lit_unevenly(name, rng):
         assert kit.iou(cutout.mask, truth) >= 0.95, (shape_name, kit.iou(cutout.mask, truth))
 
 
+def test_a_part_coloured_almost_like_the_backdrop_stays_with_the_character(rng):
+    """A body that stands out clearly and an arm only 9 levels off the backdrop's light (fur
+    on a backdrop of its colour): the arm is under the threshold on its own, but touches the
+    body, so it is the character's. The same arm with no contrast at all is not found."""
+    height, width = 300, 400
+    body = np.zeros((height, width), np.uint8)
+    cv2.circle(body, (150, 150), 70, 1, -1)
+    arm = np.zeros((height, width), np.uint8)
+    cv2.rectangle(arm, (200, 130), (330, 170), 1, -1)
+    arm = arm.astype(bool) & ~body.astype(bool)
+    backdrop = np.array([150.0, 110.0, 80.0])
+    for offset, arm_found in ((5.0, True), (0.0, False)):
+        gain = kit.lighting(rng, height, width, gradient=0.3)[:, :, None]
+        picture = backdrop * gain + rng.normal(0, 2.0, (height, width, 3))
+        picture[body.astype(bool)] = (40, 120, 60)
+        picture[arm] += offset
+        picture = kit.jpeg(np.clip(np.round(picture), 0, 255).astype(np.uint8), 80)
+        cutout = remove_background(picture)
+        truth = body.astype(bool) | arm if arm_found else body.astype(bool)
+        assert cutout.kind is PictureKind.PHOTO
+        assert kit.iou(cutout.mask, truth) >= 0.95, (offset, kit.iou(cutout.mask, truth))
+
+
 @pytest.mark.realdata
 def test_shadow_on_the_background_stays_background(rng):
     photo = kit.photo("coffee")

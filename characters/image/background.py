@@ -434,7 +434,9 @@ class _Contrast:
     """How each pixel stands out from the background: foreground (H, W) bool, what stands
     out; sharp (H, W) float32, the colour distance to the background on the picture itself;
     threshold [0..255]; background (H, W, 3) float32; colour (3,) its mean; shadows (H, W)
-    bool, the background in the character's shadow (sure background)."""
+    bool, the background in the character's shadow (sure background); weak (H, W) bool | None,
+    what stands out a little and does not look like shadow (the character's where joined to
+    it; None for the plain key)."""
 
     foreground: np.ndarray
     sharp: np.ndarray
@@ -442,6 +444,7 @@ class _Contrast:
     background: np.ndarray
     colour: np.ndarray
     shadows: np.ndarray
+    weak: np.ndarray | None = None
 
 
 def _alpha_cutout(image, max_hole_fraction, min_character_fraction) -> Cutout:
@@ -499,14 +502,15 @@ def _field_contrast(rgb, tolerance) -> _Contrast:
                          f"photograph the character on a plain surface, give a picture with "
                          f"an alpha channel, or give a tolerance to cut at (tolerance=, "
                          f"--tolerance)")
-    shadows = light.shadow_pixels(segmentation)
+    shadows, shaded = light.shadow_pixels(segmentation)
     return _Contrast(foreground=segmentation.foreground & ~shadows,
                      sharp=light.colour_distance(rgb.astype(np.float32),
                                                  segmentation.background),
                      threshold=segmentation.field.threshold,
                      background=segmentation.background,
                      colour=np.array(require_cv2().mean(segmentation.background)[:3]),
-                     shadows=shadows)
+                     shadows=shadows,
+                     weak=light.weak_foreground(segmentation) & ~shaded & ~shadows)
 
 
 def _find_character(rgb, kind, *, plain, tolerance, close_gaps, max_hole_fraction,
@@ -526,9 +530,12 @@ def _find_character(rgb, kind, *, plain, tolerance, close_gaps, max_hole_fractio
                                        and drawing.is_line_drawing(main, ink)):
         filled = drawing.fill_outline(ink, gap_limit=close_gaps)
         return _Found(mask=filled.mask, kind=PictureKind.DRAWING, drawing=filled, **found)
-    first = fill_holes(main, max_hole_fraction, contrast.sharp, 0.5 * contrast.threshold)
     if plain:
+        first = fill_holes(main, max_hole_fraction, contrast.sharp, 0.5 * contrast.threshold)
         return _Found(mask=first, kind=PictureKind.PLAIN, **found)
+    # a part coloured almost like the backdrop, joined to what stands out, is the character's
+    main = light.grow_into(main, contrast.weak)
+    first = fill_holes(main, max_hole_fraction, contrast.sharp, 0.5 * contrast.threshold)
     refined = light.refine_edge(rgb, contrast.background, first,
                                 sure_background=contrast.shadows)
     refined = largest_component(light.settle_edge(rgb, contrast.background,

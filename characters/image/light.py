@@ -5,7 +5,10 @@ lamp on one side, a vignette, a shadow. Here the background is a smooth field pe
 low-order polynomial in the picture's coordinates, fitted robustly (trimmed least squares):
 first to the border band (where the character rarely is), then again to every pixel the first
 fit called background, one degree higher. A pixel is foreground when its colour differs from
-the field by more than a threshold set by the background's own noise. The edge of a solid
+the field by more than a threshold set by the background's own noise; pixels joined to those
+that differ by less, down to a weak threshold just above the noise, join them (hysteresis: a
+character's part coloured like the backdrop still stands out from its smooth light, if only
+a little, and is kept when it touches the rest). The edge of a solid
 character is then refined with OpenCV's GrabCut, seeded from that first mask, on the picture
 with the light divided out (so the background becomes flat for its colour models); a soft
 shadow the character casts on the background (the field's own colour, only darker, and as
@@ -28,6 +31,8 @@ FIRST_DEGREE = 2           # polynomial degree of the fit to the border band
 REFIT_DEGREE = 3           # and of the fit to all of the background
 NOISE_MULTIPLE = 5.4       # threshold = this x the median residual of background pixels ...
 THRESHOLD_FLOOR = 12.0     # ... but at least this [0..255 RGB distance]
+WEAK_MULTIPLE = 4.0        # a part joined to what stands out needs only this x the noise ...
+WEAK_FLOOR = 4.0           # ... and at least this [0..255 RGB distance] (a noiseless picture)
 EDGE_BAND = 6              # [px] GrabCut decides this far either side of the first edge
 GRABCUT_ITERATIONS = 2
 GRABCUT_SEED = 1           # OpenCV's random generator, reset before each GrabCut
@@ -177,11 +182,30 @@ def segment_by_field(rgb: np.ndarray, *, threshold: float | None = None) -> LitS
                            background=background, smoothed=smoothed)
 
 
-def shadow_pixels(segmentation: LitSegmentation) -> np.ndarray:
-    """(H, W) bool: foreground pixels that are the background in shadow: the field's colour
-    direction (chromaticity), darker by a factor in [SHADOW_DARKEST, 1), and smooth (no
-    texture beyond the background's noise). Thin dark lines (pencil strokes) are kept out:
-    a shadow is as wide as several of them."""
+def weak_foreground(segmentation: LitSegmentation) -> np.ndarray:
+    """(H, W) bool: pixels off the field by more than the weak threshold (max(WEAK_FLOOR,
+    WEAK_MULTIPLE x the background's noise)): no part of the character on their own, but a
+    part of it when joined to what stands out (hysteresis)."""
+    level = max(WEAK_FLOOR, WEAK_MULTIPLE * segmentation.field.noise)
+    return segmentation.residual > min(level, segmentation.field.threshold)
+
+
+def grow_into(mask: np.ndarray, weak: np.ndarray) -> np.ndarray:
+    """(H, W) bool: the mask and every 8-connected part of `weak` that touches it."""
+    cv2 = require_cv2()
+    _, labels = cv2.connectedComponents((mask | weak).astype(np.uint8), connectivity=8)
+    joined = np.zeros(labels.max() + 1, bool)
+    joined[labels[mask]] = True
+    joined[0] = False
+    return joined[labels]
+
+
+def shadow_pixels(segmentation: LitSegmentation) -> tuple[np.ndarray, np.ndarray]:
+    """(shadows, shaded), (H, W) bool each. shaded: pixels that look like the background in
+    shadow: the field's colour direction (chromaticity), darker by a factor in
+    [SHADOW_DARKEST, 1), and smooth (no texture beyond the background's noise). shadows: the
+    foreground pixels among them, without thin dark lines (pencil strokes): a shadow is as
+    wide as several of them."""
     cv2 = require_cv2()
     # JPEG keeps colour at a quarter of the resolution: judge the hue on a smoother copy
     picture = cv2.GaussianBlur(segmentation.smoothed, (0, 0), 1.5)
@@ -191,15 +215,16 @@ def shadow_pixels(segmentation: LitSegmentation) -> np.ndarray:
     ratio = light / expected
     chroma = picture / np.maximum(light, 1.0)[:, :, None]
     hue_off = channel_sum(np.abs(chroma - background / expected[:, :, None]))
-    candidate = (segmentation.foreground & (ratio >= SHADOW_DARKEST) & (ratio < 1.0)
-                 & (hue_off <= SHADOW_HUE))
+    candidate = (ratio >= SHADOW_DARKEST) & (ratio < 1.0) & (hue_off <= SHADOW_HUE)
     # smooth: the picture equals the field times a slowly varying darkening, within noise
     darkening = cv2.GaussianBlur(ratio.astype(np.float32), (0, 0), 2.0)
     texture = colour_distance(segmentation.smoothed, background * darkening[:, :, None])
-    candidate &= texture <= SHADOW_TEXTURE * max(segmentation.field.noise, 1.0)
-    size = max(3, round(0.015 * min(candidate.shape)))
+    shaded = candidate & (texture <= SHADOW_TEXTURE * max(segmentation.field.noise, 1.0))
+    size = max(3, round(0.015 * min(shaded.shape)))
     kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (size, size))
-    return cv2.morphologyEx(candidate.astype(np.uint8), cv2.MORPH_OPEN, kernel) > 0
+    shadows = cv2.morphologyEx((shaded & segmentation.foreground).astype(np.uint8),
+                               cv2.MORPH_OPEN, kernel) > 0
+    return shadows, shaded
 
 
 def refine_edge(rgb: np.ndarray, background: np.ndarray, mask: np.ndarray, *,

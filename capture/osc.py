@@ -18,6 +18,14 @@ counts and non-numeric arguments are counted (`stats.malformed`, with the reason
 are counted too (Linux SO_RXQ_OVFL) in `stats.dropped`; the kernel reports them with the
 next datagram that does arrive. Nothing is ever sent back to the sender.
 To let performers on other machines join, bind host="0.0.0.0" explicitly.
+
+Time stamps: a frame is stamped with its datagram's arrival on the capture clock, unless the
+datagram is a bundle with a time tag (what `mop send` sends: the time the sender captured the
+frame). Then the sender's spacing is kept, free of the network's and the scheduler's jitter:
+each sender's tags are mapped onto the capture clock by one offset, its first stamped
+datagram's arrival minus its tag, taken again when a tag would map more than `EARLY` seconds
+after its arrival (that first datagram came late) or more than `LATE` seconds before it (the
+sender's clock jumped or it restarted).
 """
 from __future__ import annotations
 
@@ -41,10 +49,42 @@ MAX_CHANNELS = 256        # the most channels a source learns by itself
 MAX_BUNDLE_DEPTH = 8      # bundles nested deeper than this are refused
 _BUNDLE = b"#bundle\x00"
 _TYPE_TAGS = frozenset("ifdsbrhtmTFN[]")   # what python-osc parses without a warning
+NTP_UNIX = 2208988800     # [s] from the OSC (NTP) epoch, 1900, to the Unix epoch, 1970
+EARLY = 0.05              # [s] a tag mapped this far after its arrival moves the offset
+LATE = 0.25               # [s] a tag mapped this far before its arrival moves the offset
 
 
 class _Malformed(ValueError):
     """A datagram that is not valid OSC; the message says why."""
+
+
+def time_tag(data: bytes) -> float | None:
+    """The time tag of a bundle [s since the Unix epoch], or None (a message, or a bundle to be
+    applied "immediately")."""
+    if len(data) < 16 or not data.startswith(_BUNDLE):
+        return None
+    seconds, fraction = struct.unpack(">II", data[8:16])
+    if seconds == 0 and fraction <= 1:
+        return None
+    return seconds - NTP_UNIX + fraction / 4294967296.0
+
+
+class SenderClocks:
+    """Senders' time tags -> the capture clock (see the module): one offset per sender."""
+
+    def __init__(self):
+        self.offsets: dict = {}
+        self.anchors = 0          # offsets taken (first datagrams, late ones, clock jumps)
+
+    def map(self, sender, tag: float, arrival: float) -> float:
+        offset = self.offsets.get(sender)
+        if offset is not None:
+            t = tag + offset
+            if arrival - LATE <= t <= arrival + EARLY:
+                return t
+        self.offsets[sender] = arrival - tag
+        self.anchors += 1
+        return arrival
 
 
 def _split_datagram(data: bytes, depth: int = 0) -> list[bytes]:
@@ -162,6 +202,7 @@ class OscSource(ThreadedSource):
         self._socket: socket.socket | None = None
         self._kernel_drops = 0
         self._parser = _osc_parser()
+        self.senders = SenderClocks()
         self._start(wait=wait)
 
     @property
@@ -213,6 +254,9 @@ class OscSource(ThreadedSource):
                     self._count(dropped=total - self._kernel_drops)
                     self._kernel_drops = total
         if self._handle(data, sender):
+            tag = time_tag(data)
+            if tag is not None:
+                t = self.senders.map(sender, tag, t)
             self._emit(t, self._state.copy())
 
     # -- parsing ----------------------------------------------------------------------------

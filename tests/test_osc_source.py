@@ -249,3 +249,48 @@ def test_malformed_bundles_are_counted_not_logged(sender, caplog, capfd):
             assert source.status is Status.OK
     assert not [r for r in caplog.records if r.name == "root"]
     assert "Could not identify" not in capfd.readouterr().err
+
+
+def _stamped(address, value, tag):
+    bundle = OscBundleBuilder(tag)
+    bundle.add_content(_built(address, value))
+    return bundle.build().dgram
+
+
+def test_time_tagged_bundles_keep_the_senders_spacing_not_the_arrivals(sender):
+    """Frames tagged 40 ms apart and sent each 0-30 ms after its time (the sender's and the
+    network's jitter) keep the tags' spacing on the capture clock, anchored at the first one's
+    arrival; plain messages keep their arrival times."""
+    from capture.osc import time_tag
+    rng = np.random.default_rng(5)
+    base = time.time() - 3600.0                # the sender's clock: far from ours
+    with OscSource("127.0.0.1", 0, address="/x", channels=1) as source:
+        target = ("127.0.0.1", source.port)
+        arrivals, start = [], time.monotonic()
+        for k in range(8):
+            time.sleep(max(start + 0.04 * k + float(rng.uniform(0.0, 0.03)) - time.monotonic(),
+                           0.0))
+            arrivals.append(time.monotonic())
+            sender.sendto(_stamped("/x", float(k), base + 0.04 * k), target)
+        frames = drain(source, 8)
+        sender.sendto(message("/x", 9.0), target)
+        plain = drain(source, 1)[0]
+    assert time_tag(_stamped("/x", 0.0, base)) == pytest.approx(base, abs=1e-6)
+    assert [f.values[0] for f in frames] == [float(k) for k in range(8)]
+    times = np.array([f.t for f in frames])
+    assert np.allclose(np.diff(times), 0.04, atol=1e-5)
+    assert abs(times[0] - arrivals[0]) < 0.05 and source.senders.anchors == 1
+    assert np.ptp(np.diff(arrivals)) > 0.01          # the arrivals were irregular
+    assert plain.t == pytest.approx(time.monotonic(), abs=1.0) and plain.t > times[-1] - 0.1
+
+
+def test_a_sender_whose_clock_jumps_is_anchored_again(sender):
+    base = time.time()
+    with OscSource("127.0.0.1", 0, address="/x", channels=1) as source:
+        target = ("127.0.0.1", source.port)
+        sender.sendto(_stamped("/x", 1.0, base), target)
+        first = drain(source, 1)[0]
+        sender.sendto(_stamped("/x", 2.0, base - 30.0), target)     # its clock went back
+        second = drain(source, 1)[0]
+    assert source.senders.anchors == 2
+    assert second.t >= first.t and second.t == pytest.approx(time.monotonic(), abs=1.0)

@@ -277,3 +277,28 @@ def test_a_performer_on_another_process_joins_over_osc(tmp_path):
     assert performer.returncode in (0, 130), err
     assert "ok" in hand_status
     assert "hand_circle" in creature_actions
+
+
+def test_mop_send_tags_each_frame_with_its_capture_time():
+    """Every datagram `mop send` sends is a bundle tagged with the frame's capture time: a take
+    replayed in real time has the take's spacing in its tags, whatever the sending loop's."""
+    from capture import open_source
+    from capture.osc import time_tag
+    port = free_udp_port()
+    listener = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    listener.bind(("127.0.0.1", port))
+    listener.settimeout(5.0)
+    sender = mop_process("send", f"replay:{TAKES / 'hand_show'}", "--to", f"127.0.0.1:{port}",
+                         "--address", "/hand", "--duration", "1.5")
+    tags = []
+    try:
+        while len(tags) < 20:
+            tags.append(time_tag(listener.recv(65536)))
+    finally:
+        sender.kill()
+        listener.close()
+    with open_source(f"replay:{TAKES / 'hand_show'}?realtime=false") as take:
+        times = [take.read(timeout=1.0).t for _ in range(len(tags))]
+    assert None not in tags
+    assert np.allclose(np.diff(tags), np.diff(times), atol=1e-5)
+    assert abs(tags[0] - time.time()) < 60.0

@@ -3,7 +3,10 @@
 Run on the performer's machine: it opens any capture source (a glove, a camera tracker, a
 replayed take) and sends every frame as one OSC message `ADDRESS f f f ...` (all channels, NaN
 for missing) to the machine that runs `mop perform`, whose session names the performer's source
-`osc:0.0.0.0:PORT/ADDRESS?channels=a,b,c`."""
+`osc:0.0.0.0:PORT/ADDRESS?channels=a,b,c`. Each message travels in a bundle whose time tag is
+the time the frame was captured (this machine's clock): the receiving session keeps the
+frames' spacing as captured, whatever the network and the two schedulers add (see
+`capture.osc`)."""
 from __future__ import annotations
 
 import signal
@@ -32,6 +35,7 @@ def register(subparsers) -> None:
 
 
 def run(args) -> int:
+    from pythonosc.osc_bundle_builder import OscBundleBuilder
     from pythonosc.osc_message_builder import OscMessageBuilder
     from pythonosc.udp_client import UDPClient
 
@@ -49,6 +53,7 @@ def run(args) -> int:
     signal.signal(signal.SIGTERM, lambda *_: stop.append(True))
     sent = 0
     started = time.monotonic()
+    to_wall = time.time() - started      # the capture clock (monotonic) -> the time tags
     with open_source(args.source) as source:
         if not args.quiet:
             channels = ", ".join(source.channels) or "channels learnt on the first frame"
@@ -66,7 +71,9 @@ def run(args) -> int:
                 message = OscMessageBuilder(address=args.address)
                 for value in frame.values:
                     message.add_arg(float(value), "f")
-                client.send(message.build())
+                bundle = OscBundleBuilder(captured_at(frame.t) + to_wall)
+                bundle.add_content(message.build())
+                client.send(bundle.build())
                 sent += 1
         except KeyboardInterrupt:
             pass
@@ -77,3 +84,10 @@ def run(args) -> int:
         status = getattr(source.status, "value", source.status)
         raise CommandError(f"{args.source} gave no frame to send (status {status})")
     return 0
+
+
+def captured_at(t: float) -> float:
+    """A frame's capture time on the capture clock: its own stamp, or now for a source that
+    does not stamp on that clock (e.g. a take read as fast as it goes)."""
+    now = time.monotonic()
+    return t if now - 60.0 <= t <= now + 0.1 else now

@@ -206,6 +206,9 @@ def live(seconds: float, busy: bool, workers: list[str]) -> None:
                   f"{stages['input_to_pose']['median']:>10.2f}"
                   f"{stages['input_to_pose']['p90']:>7.2f}{render:>8.1f}"
                   f"{report['cpu_ms']:>11.1f}", flush=True)
+            parts = ", ".join(f"{name[9:]} {row['median']:.2f} (p90 {row['p90']:.2f})"
+                              for name, row in stages.items() if name.startswith("simulate "))
+            print(f"{'':<4}simulate per character, median ms: {parts}", flush=True)
     finally:
         if spinner is not None:
             spinner.kill()

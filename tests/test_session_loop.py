@@ -573,3 +573,14 @@ def test_replay_runs_ahead_of_its_pictures_and_draws_every_frame_in_order(tmp_pa
     assert [(index, repeat) for index, repeat, _ in recorder.written] == [
         (k, False) for k in range(frames)]
     assert worker.rendered == frames and worker.repeated == 0
+
+
+def test_the_report_splits_the_simulate_stage_by_character():
+    session, _ = standin_session("replay", delay=0.0)
+    report = session.run(duration=1.0)
+    part, whole = report.stages["simulate c"], report.stages["simulate"]
+    assert part["count"] == whole["count"] == report.frames == 25
+    assert 0 < part["mean"] <= whole["mean"]
+    table = report.format().splitlines()
+    row = table.index(next(line for line in table if line.startswith("  simulate")))
+    assert table[row + 1].split()[0] == "c"

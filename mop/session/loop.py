@@ -304,6 +304,7 @@ class CharacterRuntime:
         self.position = tuple(position)
         self.tracks = list(tracks)
         self.targets: dict[str, np.ndarray] = {}
+        self.timing = f"simulate {name}"      # its part of the loop's simulate stage
 
     def warm_up(self, dt: float, *, draw: bool = True) -> None:
         """Step the puppet on its rest targets and (`draw`) draw it once, then put it back at
@@ -363,6 +364,8 @@ class Session:
         self.frame_index = 0
         self.t = 0.0
         self.clock = StageClock()
+        for character in self.characters:
+            self.clock.track(character.timing)
         self.events: list[dict] = []
         self.ended_at: float | None = None
         self.wall_start: float | None = None
@@ -419,20 +422,24 @@ class Session:
                                         "message": performer.problem})
                     log.warning("performer %s: %s", performer.name, performer.problem)
         followed = clock()
+        add = self.clock.add
+        begun = followed
         for character in self.characters:
             targets = character.targets
             targets.clear()
             for track in character.tracks:
                 track.update(t, self._by_name[track.performer].state, targets)
             character.puppet.step(self.dt, targets)
-        simulated = clock()
+            ended = clock()
+            add(character.timing, 1e3 * (ended - begun))
+            begun = ended
+        simulated = begun
         state = self.state() if self._state_outputs or self.worker is not None else None
         for output in self._state_outputs:
             output.send(state)
         if self.worker is not None:
             self.worker.submit(self.frame_index, state)
         done = clock()
-        add = self.clock.add
         add("capture", 1e3 * (captured - start))
         add("follow", 1e3 * (followed - captured))
         add("simulate", 1e3 * (simulated - followed))

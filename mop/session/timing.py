@@ -17,15 +17,26 @@ class StageClock:
     `total` is the loop's own work per frame (capture to send); `input_to_pose` runs from the
     start of the frame's capture stage (its input is read) to the end of its simulate stage (the
     puppets hold the pose that input asked for). "render" (draw + compose) and "output" (video,
-    PNG, preview writes) are the render worker's, per picture, in its own thread."""
+    PNG, preview writes) are the render worker's, per picture, in its own thread. Other names
+    get a ring of their first `add` (the loop adds "simulate CHARACTER", each character's part
+    of the simulate stage)."""
 
     def __init__(self, capacity: int = 4096):
         self.capacity = capacity
         self.samples = {name: np.zeros(capacity) for name in STAGES + LATENCIES}
         self.counts = {name: 0 for name in self.samples}
 
+    def track(self, name: str) -> None:
+        """Keep a ring for `name` (before the first `add` from another thread)."""
+        if name not in self.samples:
+            self.samples[name] = np.zeros(self.capacity)
+            self.counts[name] = 0
+
     def add(self, name: str, milliseconds: float) -> None:
-        count = self.counts[name]
+        count = self.counts.get(name)
+        if count is None:
+            self.track(name)
+            count = 0
         self.samples[name][count % self.capacity] = milliseconds
         self.counts[name] = count + 1
 
@@ -36,7 +47,7 @@ class StageClock:
     def summary(self) -> dict[str, dict[str, float]]:
         """{name: {"median", "p90", "mean", "max", "count"}} in milliseconds."""
         out = {}
-        for name in self.samples:
+        for name in list(self.samples):
             values = self.values(name).copy()    # the worker thread may be adding
             if values.size == 0:
                 out[name] = {"median": 0.0, "p90": 0.0, "mean": 0.0, "max": 0.0, "count": 0}
@@ -115,6 +126,11 @@ class SessionReport:
                      "output": "output (worker)"}.get(name, name.replace("_", " "))
             lines.append(f"  {label:<16}{row['median']:>10.2f}{row['p90']:>9.2f}"
                          f"{row['mean']:>9.2f}")
+            if name == "simulate":
+                for part, row in self.stages.items():
+                    if part.startswith("simulate ") and row["count"]:
+                        lines.append(f"    {part[9:]:<14}{row['median']:>10.2f}"
+                                     f"{row['p90']:>9.2f}{row['mean']:>9.2f}")
         for name, info in self.performers.items():
             status = info["status"]
             if status not in ("ok", "ended") and info.get("message"):

@@ -7,10 +7,11 @@ Every kernel reads a ``model.ForwardModel`` (built once) and writes a ``model.Fo
    keeps the states within ``p`` of its rounded mean (MOP equations 6-7; the entry track the
    first ``2p + 1``), mixes its speed levels and advances; a new repetition is seeded at the
    first state (``_seed_entry``).
-2. ``_emit``: the emission of every state in either track's support; the recognition scores
-   (``frame_loglik`` rows 1-2) from the same predicted states (``_recognition``).
-3. ``_weigh``: each row times its emission, scaled by the largest so nothing under- or
-   overflows however long the run; ``_normalise``: the per-frame normaliser.
+2. ``_emit``: the emission of every state in either track's support.
+3. ``_weigh``: the recognition scores (``frame_loglik`` rows 1-2) from the predicted states;
+   each row times its emission, scaled by the largest so nothing under- or overflows however
+   long the run, and divided by the per-frame normaliser (``_normalise`` when nothing is
+   observed).
 4. ``_adapt_scales``: the online emission scales (EM on one scalar per template).
 5. ``_prune``: edge states holding almost nothing are dropped (beam pruning).
 6. ``_finish``: each track's moments; the entry track takes over when it holds more mass.
@@ -129,16 +130,15 @@ def _mix_speeds(model, state, track, first, last):
     """Rows first..last of a track: each speed level takes its neighbours' share."""
     alpha, change, mix = state.alpha, model.speed_change, state.mix
     M = alpha.shape[2]
+    stay, up, down = change[0], change[1], change[2]
     for r in range(first, last + 1):
+        row = alpha[track, r]
+        mix[0] = row[0] * stay[0] + row[1] * down[0]
+        for m in range(1, M - 1):
+            mix[m] = row[m] * stay[m] + row[m - 1] * up[m] + row[m + 1] * down[m]
+        mix[M - 1] = row[M - 1] * stay[M - 1] + row[M - 2] * up[M - 1]
         for m in range(M):
-            v = alpha[track, r, m] * change[m, 1]
-            if m > 0:
-                v += alpha[track, r, m - 1] * change[m - 1, 2]
-            if m < M - 1:
-                v += alpha[track, r, m + 1] * change[m + 1, 0]
-            mix[m] = v
-        for m in range(M):
-            alpha[track, r, m] = mix[m]
+            row[m] = mix[m]
 
 
 @inline
@@ -146,36 +146,38 @@ def _predict_track(model, state, track, off, T, lo, hi, keep_scale):
     """Transition one track in place: truncated to states [lo, hi] of the template, speed
     levels mixed, advanced; the mass times ``keep_scale`` (1 - restart). Returns the last
     target state."""
-    alpha, rowsum = state.alpha, state.rowsum
-    advance, tail, span = model.advance, model.advance_tail, model.advance_range
+    alpha, rowsum, advance, tail, acc = (state.alpha, state.rowsum, model.advance,
+                                         model.advance_tail, state.mix)
     M = alpha.shape[2]
-    A = advance.shape[1] - 1
+    A = advance.shape[0] - 1
     if M > 1:
         _mix_speeds(model, state, track, off + lo, off + hi)
     top = min(hi + A, T - 1)
-    # descending, so every source row (<= target) is read before it is overwritten
+    # descending, so that every source row (<= target) is read before it is overwritten; each
+    # level's advances that it cannot make have probability 0 (dense over levels: vectorised)
     for j in range(top, lo - 1, -1):
         r = off + j
+        for m in range(M):
+            acc[m] = 0.0
+        if j == T - 1:
+            # absorbing end: every advance that would pass the last state lands on it
+            for i in range(max(lo, T - 1 - A), min(hi, T - 1) + 1):
+                by = tail[T - 1 - i]
+                source = alpha[track, off + i]
+                for m in range(M):
+                    acc[m] += source[m] * by[m]
+        else:
+            for a in range(max(0, j - hi), min(A, j - lo) + 1):
+                by = advance[a]
+                source = alpha[track, r - a]
+                for m in range(M):
+                    acc[m] += source[m] * by[m]
+        target = alpha[track, r]
         total = 0.0
         for m in range(M):
-            s = 0.0
-            if j == T - 1:
-                # absorbing end: every advance that would pass the last state lands on it
-                for i in range(max(lo, T - 1 - A), min(hi, T - 1) + 1):
-                    s += alpha[track, off + i, m] * tail[m, T - 1 - i]
-            else:
-                # only the advances level m can make (two neighbours for a fractional speed)
-                a_first = span[m, 0]
-                a_last = span[m, 1]
-                if j - a_last < lo:
-                    a_last = j - lo
-                if j - a_first > hi:
-                    a_first = j - hi
-                for a in range(a_first, a_last + 1):
-                    s += alpha[track, r - a, m] * advance[m, a]
-            s *= keep_scale
-            alpha[track, r, m] = s
-            total += s
+            v = acc[m] * keep_scale
+            target[m] = v
+            total += v
         rowsum[track, r] = total
     return top
 
@@ -389,80 +391,140 @@ def _predictive_loglik(state, e, k, off):
 
 
 @inline
-def _recognition(model, state, k):
-    """The recognition score of this frame (``frame_loglik[1, k]``), from the predicted states:
-    model 1's predictive likelihood, or its mixture with model 2's (weight ``mixture[0]``,
-    whose log share goes to ``frame_loglik[2, k]``)."""
-    off = model.offsets[k]
-    score = _predictive_loglik(state, 1, k, off)
-    mixture = state.mixture[0]
-    if mixture > 0.0:
-        a = math.log(mixture) + _predictive_loglik(state, 2, k, off)
-        b = math.log1p(-mixture) + score
-        top = a if a > b else b
-        score = top + math.log(math.exp(a - top) + math.exp(b - top))
-        state.frame_loglik[2, k] = a - score
-    state.frame_loglik[1, k] = score
+def _mixed(score, mixture, exact):
+    """The recognition score: ``mixture`` of the exact component's predictive log-likelihood
+    with ``1 - mixture`` of model 1's (``score``), and the log of the exact one's share."""
+    a = math.log(mixture) + exact
+    b = math.log1p(-mixture) + score
+    top = a if a > b else b
+    mixed = top + math.log(math.exp(a - top) + math.exp(b - top))
+    return mixed, a - mixed
+
+
+@inline
+def _tops(state, k, off, dual, mixed):
+    """The largest emission of each model over the rows that hold mass."""
+    rowsum, logb, support = state.rowsum, state.logb, state.support
+    top0 = -np.inf
+    top1 = -np.inf
+    top2 = -np.inf
+    for t in range(2):
+        for j in range(support[k, t, 0], support[k, t, 1] + 1):
+            r = off + j
+            if rowsum[t, r] > 0.0:
+                top0 = max(top0, logb[0, r])
+                if dual:
+                    top1 = max(top1, logb[1, r])
+                    if mixed:
+                        top2 = max(top2, logb[2, r])
+    return top0, top1, top2
+
+
+@inline
+def _lift_rows(state, k, off, shift):
+    """``state.lift[r]``: row r's emission (model 0) over ``exp(shift)`` where it holds mass,
+    else 0; returns the mass it leaves, sum_j predicted_j * lift_j."""
+    rowsum, logb, support, lift = state.rowsum, state.logb, state.support, state.lift
+    c = 0.0
+    for t in range(2):
+        for j in range(support[k, t, 0], support[k, t, 1] + 1):
+            r = off + j
+            v = rowsum[t, r]
+            e = math.exp(logb[0, r] - shift) if v > 0.0 else 0.0
+            lift[r] = e
+            c += v * e
+    return c
 
 
 @inline
 def _weigh(model, state, k):
-    """Each row of both tracks times its emission (model 0) over the largest one; returns the
-    log of that scale (the rows with mass may all sit far below the best row: then the best
-    product of mass and emission)."""
-    off, M = model.offsets[k], state.alpha.shape[2]
-    rowsum, logb, support, alpha = state.rowsum, state.logb, state.support, state.alpha
-    shift = -np.inf
-    for t in range(2):
-        for j in range(support[k, t, 0], support[k, t, 1] + 1):
-            if rowsum[t, off + j] > 0.0 and logb[0, off + j] > shift:
-                shift = logb[0, off + j]
-    if shift == -np.inf:
-        shift = 0.0
+    """Each row of both tracks times its emission (model 0) over the largest one, then both
+    tracks divided by their total mass c; returns (c, the log of the scale), c = 0 when it is
+    not a positive finite number (``_lost``). Before that, from the predicted states, the
+    recognition score (``frame_loglik[1, k]``): model 1's predictive likelihood, or its
+    mixture with model 2's (weight ``mixture[0]``, whose log share goes to
+    ``frame_loglik[2, k]``). One pass finds each model's largest emission, one takes the
+    exponentials (the rows with mass may all sit far below the best row: then
+    ``_predictive_loglik`` and the best product of mass and emission)."""
+    off, M, dual = model.offsets[k], state.alpha.shape[2], model.dual
+    rowsum, logb, support, alpha, lift = (state.rowsum, state.logb, state.support,
+                                          state.alpha, state.lift)
+    mixture = state.mixture[0]
+    mixed = dual and mixture > 0.0
+    top0, top1, top2 = _tops(state, k, off, dual, mixed)
+    shift = top0 if top0 > -np.inf else 0.0
     c = 0.0
+    c1 = 0.0
+    c2 = 0.0
     for t in range(2):
         for j in range(support[k, t, 0], support[k, t, 1] + 1):
-            c += rowsum[t, off + j] * math.exp(logb[0, off + j] - shift)
+            r = off + j
+            v = rowsum[t, r]
+            e = 0.0
+            if v > 0.0:
+                e = math.exp(logb[0, r] - shift)
+                if dual:
+                    c1 += v * math.exp(logb[1, r] - top1)
+                    if mixed:
+                        c2 += v * math.exp(logb[2, r] - top2)
+            lift[r] = e
+            c += v * e
+    if dual:
+        score = math.log(c1) + top1 if c1 > 1e-280 else _predictive_loglik(state, 1, k, off)
+        if mixed:
+            exact = math.log(c2) + top2 if c2 > 1e-280 else \
+                _predictive_loglik(state, 2, k, off)
+            score, state.frame_loglik[2, k] = _mixed(score, mixture, exact)
+        state.frame_loglik[1, k] = score
     if not c > 1e-280:
         best = -np.inf
         for t in range(2):
             for j in range(support[k, t, 0], support[k, t, 1] + 1):
                 v = rowsum[t, off + j]
                 if v > 0.0:
-                    lv = math.log(v) + logb[0, off + j]
-                    if lv > best:
-                        best = lv
+                    best = max(best, math.log(v) + logb[0, off + j])
         shift = best
+        c = _lift_rows(state, k, off, shift)
+    if not (c > 0.0 and c < np.inf):
+        _lost(state, k)
+        return 0.0, shift
+    inv = 1.0 / c
     for t in range(2):
         for j in range(support[k, t, 0], support[k, t, 1] + 1):
             r = off + j
-            e = math.exp(logb[0, r] - shift)
-            rowsum[t, r] *= e
+            f = lift[r] * inv
+            rowsum[t, r] *= f
             for m in range(M):
-                alpha[t, r, m] *= e
-    return shift
+                alpha[t, r, m] *= f
+    return c, shift
 
 
 @inline
-def _normalise(model, state, k, n_obs):
-    """Divide both tracks by their total mass c; returns c, or 0 when it is not a positive
-    finite number (unreachable with bounded input): the follower then starts over next
-    frame and says so with a finite, very low likelihood."""
+def _lost(state, k):
+    """A frame whose mass is not a positive finite number (unreachable with bounded input):
+    the follower starts over next frame and says so with a finite, very low likelihood."""
+    state.frame_loglik[0, k] = -1e300
+    state.frame_loglik[1, k] = -1e300
+    state.loglik[k] = max(state.loglik[k] - 1e300, -1e308)
+    state.fresh[k] = True
+    state.moments[k, 0, 0] = 0.0
+    state.moments[k, 1, 0] = 0.0
+
+
+@inline
+def _normalise(model, state, k):
+    """A frame with nothing observed: both tracks divided by their total mass c, whose log is
+    the recognition score; returns c, or 0 (``_lost``)."""
     off, M = model.offsets[k], state.alpha.shape[2]
     rowsum, support, alpha = state.rowsum, state.support, state.alpha
     c = 0.0
     for t in range(2):
         for j in range(support[k, t, 0], support[k, t, 1] + 1):
             c += rowsum[t, off + j]
-    if n_obs == 0 and c > 0.0:
+    if c > 0.0:
         state.frame_loglik[1, k] = math.log(c)
     if not (c > 0.0 and c < np.inf):
-        state.frame_loglik[0, k] = -1e300
-        state.frame_loglik[1, k] = -1e300
-        state.loglik[k] = max(state.loglik[k] - 1e300, -1e308)
-        state.fresh[k] = True
-        state.moments[k, 0, 0] = 0.0
-        state.moments[k, 1, 0] = 0.0
+        _lost(state, k)
         return 0.0
     inv = 1.0 / c
     for t in range(2):
@@ -587,10 +649,9 @@ def template_step(model, state, k, n_obs):
     shift = 0.0
     if n_obs > 0:
         _emit(model, state, k, n_obs)
-        if model.dual:
-            _recognition(model, state, k)
-        shift = _weigh(model, state, k)
-    c = _normalise(model, state, k, n_obs)
+        c, shift = _weigh(model, state, k)
+    else:
+        c = _normalise(model, state, k)
     if c == 0.0:
         return
     s2 = state.scale2[0, k]

@@ -32,7 +32,8 @@ The layout of the state (see ``_kernels`` for the algorithm):
 - ``outliers (1,)``: channels of the last frame outside ``[model.lower, model.upper]`` (far
   outside what the templates span: a stuck or absurd sensor), left out like missing ones.
 - Scratch: ``xs, observed (D,)`` (the cleaned frame), ``mix (M,)``, ``residual (S,)`` (each
-  state's capped sum of squared z-scores), ``sub (4, S)`` (see ``_kernels._subframe_rows``).
+  state's capped sum of squared z-scores), ``lift (S,)`` (each state's emission over the
+  frame's largest), ``sub (4, S)`` (see ``_kernels._subframe_rows``).
 """
 from __future__ import annotations
 
@@ -59,10 +60,9 @@ class ForwardModel(NamedTuple):
     exact_log: np.ndarray      # (K, D): log exact scale
     lower: np.ndarray          # (D,): a value outside [lower, upper] is an outlier (left out)
     upper: np.ndarray          # (D,)
-    advance: np.ndarray        # (M, A + 1): P(advance by a states | speed level)
-    advance_tail: np.ndarray   # (M, A + 1): P(advance >= a), what lands on the last state
-    advance_range: np.ndarray  # (M, 2) int64: first and last nonzero advance of each level
-    speed_change: np.ndarray   # (M, 3): P(level m -> m - 1, m, m + 1)
+    advance: np.ndarray        # (A + 1, M): P(advance by a states | speed level m)
+    advance_tail: np.ndarray   # (A + 1, M): P(advance >= a), what lands on the last state
+    speed_change: np.ndarray   # (3, M): P(level m stays), P(from m - 1 to m), P(m + 1 to m)
     initial_speed: np.ndarray  # (M,): speed level distribution of a new repetition
     adapt: np.ndarray          # (2, 3): [forgetting factor, lowest, highest scale**2] per row
     cap: float                 # squared z-scores are capped at this (inf: plain Gaussian)
@@ -93,6 +93,7 @@ class ForwardState(NamedTuple):
     observed: np.ndarray
     mix: np.ndarray
     residual: np.ndarray
+    lift: np.ndarray
     sub: np.ndarray
 
 
@@ -147,15 +148,17 @@ def _emission_tables(sigmas: np.ndarray, rec: np.ndarray | None):
 
 
 def _transition_tables(transitions: TransitionModel):
-    advance = np.ascontiguousarray(transitions.advance, dtype=np.float64)
-    # advance_tail[m, r] = P(advance >= r): what lands on the absorbing last state
-    tail = np.ascontiguousarray(np.cumsum(advance[:, ::-1], axis=1)[:, ::-1])
-    nonzero = advance > 0
-    span = np.ascontiguousarray(np.stack(
-        [nonzero.argmax(axis=1), nonzero.shape[1] - 1 - nonzero[:, ::-1].argmax(axis=1)],
-        axis=1), dtype=np.int64)
-    return (advance, tail, span,
-            np.ascontiguousarray(transitions.speed_change, dtype=np.float64),
+    """The transition model's tables by level along the last axis (what the kernels'
+    innermost loops run over)."""
+    advance = np.asarray(transitions.advance, dtype=np.float64)
+    # tail[m, r] = P(advance >= r): what lands on the absorbing last state
+    tail = np.cumsum(advance[:, ::-1], axis=1)[:, ::-1]
+    change = np.asarray(transitions.speed_change, dtype=np.float64)
+    into = np.zeros((3, change.shape[0]))
+    into[0] = change[:, 1]
+    into[1, 1:] = change[:-1, 2]
+    into[2, :-1] = change[1:, 0]
+    return (np.ascontiguousarray(advance.T), np.ascontiguousarray(tail.T), into,
             np.ascontiguousarray(transitions.initial_speed, dtype=np.float64))
 
 
@@ -248,7 +251,8 @@ def forward_state(forward: Forward) -> ForwardState:
         frame_loglik=np.zeros((3, K)), scale2=np.ones((2, K)), scale_weight=np.zeros((2, K)),
         restart=np.tile(forward.restart, (K, 1)), subframe=np.zeros(K, dtype=np.bool_),
         mixture=np.zeros(1), outliers=np.zeros(1, dtype=np.int64), xs=np.zeros(D),
-        observed=np.zeros(D), mix=np.zeros(M), residual=np.zeros(S), sub=np.zeros((4, S)))
+        observed=np.zeros(D), mix=np.zeros(M), residual=np.zeros(S), lift=np.zeros(S),
+        sub=np.zeros((4, S)))
     reset_forward(forward, state)
     return state
 

@@ -14,6 +14,7 @@ source: scikit-image's astronaut and matplotlib's Grace Hopper, each a face and 
 """
 import importlib.util
 import math
+import re
 from pathlib import Path
 
 import numpy as np
@@ -246,6 +247,35 @@ def test_mop_record_takes_a_face_from_a_camera(tmp_path, capsys):
     assert np.all((roll > -16) & (roll < 10))
     tracking = take.extra["source_stats"]["tracking"]
     assert tracking["fps"] > 0 and tracking["latency_ms"] > 0
+
+
+def test_a_calibration_take_from_a_camera_names_what_the_camera_did_not_see(tmp_path, capsys):
+    # the astronaut's body, still then leaning: the pose tracker sees the shoulder line, not
+    # the left wrist (out of the picture); the take calibrates what it saw
+    from mop.cli import main
+    from mop.takes import TakeStore, calibration_of
+
+    photo = astronaut()
+    angles = np.r_[[0.0] * 30, np.linspace(0, 20, 10), [20.0] * 10, np.linspace(20, -20, 10),
+                   [-20.0] * 10]
+    video = write_video(tmp_path / "lean.mkv", [place(photo, placement(photo, angle=a))
+                                                for a in angles])
+    folder = tmp_path / "recordings"
+    assert main(["record", "--performer", "ana", "--calibrate", "--duration", "60",
+                 "--source", f"camera:{video}:pose?realtime=false", "--recordings",
+                 str(folder), "--countdown", "0"]) == 0
+    out = capsys.readouterr().out
+    assert 'calibration = "ana-calibration-001"' in out
+    assert re.search(r"\n  lean +rest .* range ", out)
+    unseen = re.findall(r"\n  (\S+) +not calibrated: .*fewer than", out)
+    assert "wrist_left" in unseen and "lean" not in unseen
+    take = TakeStore(folder).load("ana-calibration-001")
+    assert len(take.times) >= 0.9 * len(angles)      # the file read to its end
+    lean = calibration_of(take, ["lean"])
+    assert lean.high[0] - lean.low[0] > 25            # [deg]: the picture leant +-20
+    # a session's performer bound to channels the take did not see is told which
+    with pytest.raises(Exception, match="fewer than .* 'wrist_left'"):
+        calibration_of(take, ["lean", "wrist_left"])
 
 
 def test_a_glove_performer_takes_a_camera_as_it_is(tmp_path):

@@ -216,8 +216,17 @@ def calibration_report(take, store=None) -> list[str]:
     """What a calibration take measured, per channel, against the newest calibration of each
     other performer in ``store`` with those channels, and how to use it."""
     from followers.calibration import calibrate
-    from mop.takes import calibration_of, newest_calibration
-    measured = calibration_of(take)
+    from mop.takes import TakeError, calibration_of, newest_calibration
+    # a channel too seldom seen to measure (a camera's other hand, an elbow out of the
+    # picture) is named, not measured: a session whose performer does not use it can use the
+    # take; with none measurable the take's own error is raised
+    unseen = {}
+    for channel in take.channels:
+        try:
+            calibration_of(take, [channel])
+        except TakeError as error:
+            unseen[channel] = str(error).split(": ", 1)[-1]
+    measured = calibration_of(take, [c for c in take.channels if c not in unseen] or None)
     lines = [f"calibration of {take.performer}: rest and range (2nd-98th percentile) per "
              f"channel"]
     for name, rest, low, high in zip(measured.channels, measured.rest, measured.low,
@@ -227,13 +236,20 @@ def calibration_report(take, store=None) -> list[str]:
                      f"{still}")
     others = sorted({info.performer for info in store.list()} - {take.performer}) \
         if store is not None else []
+    for channel, why in unseen.items():
+        lines.append(f"  {channel:<24} not calibrated: {why}")
     for other in others:
-        name = newest_calibration(store, other, take.channels)
+        name = newest_calibration(store, other, measured.channels)
         if name is None:
             continue
-        mapped = calibrate(measured, calibration_of(store.load(name), take.channels))
+        try:
+            reference = calibration_of(store.load(name), measured.channels)
+        except TakeError as error:
+            lines.append(f"  onto {other} ({name}): {error}")
+            continue
+        mapped = calibrate(measured, reference)
         lines.append(f"  onto {other} ({name}): gain " + ", ".join(
-            f"{c} {g:.2f}" for c, g in zip(take.channels, mapped.gain)))
+            f"{c} {g:.2f}" for c, g in zip(measured.channels, mapped.gain)))
     lines.append(f"use it in a session: [performers.NAME] calibration = \"{take.name}\" (the "
                  f"author records one too, with the same channels)")
     return lines

@@ -127,18 +127,48 @@ def _clear_rows(state, track, first, last):
 
 @inline
 def _mix_speeds(model, state, track, first, last):
-    """Rows first..last of a track: each speed level takes its neighbours' share."""
-    alpha, change, mix = state.alpha, model.speed_change, state.mix
+    """Rows first..last of a track: each speed level takes its neighbours' share (in place,
+    the level below's former value carried along)."""
+    alpha, change = state.alpha, model.speed_change
     M = alpha.shape[2]
     stay, up, down = change[0], change[1], change[2]
     for r in range(first, last + 1):
         row = alpha[track, r]
-        mix[0] = row[0] * stay[0] + row[1] * down[0]
+        below = row[0]
+        row[0] = below * stay[0] + row[1] * down[0]
         for m in range(1, M - 1):
-            mix[m] = row[m] * stay[m] + row[m - 1] * up[m] + row[m + 1] * down[m]
-        mix[M - 1] = row[M - 1] * stay[M - 1] + row[M - 2] * up[M - 1]
+            here = row[m]
+            row[m] = here * stay[m] + below * up[m] + row[m + 1] * down[m]
+            below = here
+        row[M - 1] = row[M - 1] * stay[M - 1] + below * up[M - 1]
+
+
+@inline
+def _advance_row(alpha, track, r, first, last, by, keep_scale):
+    """Row r of a track := keep_scale * sum over a in [first, last] of row r - a times
+    ``by[a]`` (per level); returns its mass. Rows below r are read before r is written."""
+    target = alpha[track, r]
+    M = target.shape[0]
+    total = 0.0
+    if first == 0 and last == 3:
+        # the common case (every advance of the speed model), in one pass over the levels
+        s0, s1, s2, s3 = alpha[track, r], alpha[track, r - 1], alpha[track, r - 2], \
+            alpha[track, r - 3]
+        b0, b1, b2, b3 = by[0], by[1], by[2], by[3]
         for m in range(M):
-            row[m] = mix[m]
+            v = (((s0[m] * b0[m] + s1[m] * b1[m]) + s2[m] * b2[m]) + s3[m] * b3[m]) * keep_scale
+            target[m] = v
+            total += v
+        return total
+    acc = 0.0
+    for m in range(M):
+        acc = 0.0
+        for a in range(first, last + 1):
+            acc += alpha[track, r - a, m] * by[a, m]
+        acc *= keep_scale
+        target[m] = acc
+        total += acc
+    return total
 
 
 @inline
@@ -146,39 +176,23 @@ def _predict_track(model, state, track, off, T, lo, hi, keep_scale):
     """Transition one track in place: truncated to states [lo, hi] of the template, speed
     levels mixed, advanced; the mass times ``keep_scale`` (1 - restart). Returns the last
     target state."""
-    alpha, rowsum, advance, tail, acc = (state.alpha, state.rowsum, model.advance,
-                                         model.advance_tail, state.mix)
-    M = alpha.shape[2]
+    alpha, rowsum, advance = state.alpha, state.rowsum, model.advance
     A = advance.shape[0] - 1
-    if M > 1:
+    if alpha.shape[2] > 1:
         _mix_speeds(model, state, track, off + lo, off + hi)
     top = min(hi + A, T - 1)
     # descending, so that every source row (<= target) is read before it is overwritten; each
-    # level's advances that it cannot make have probability 0 (dense over levels: vectorised)
+    # level's advances that it cannot make have probability 0
     for j in range(top, lo - 1, -1):
         r = off + j
-        for m in range(M):
-            acc[m] = 0.0
         if j == T - 1:
             # absorbing end: every advance that would pass the last state lands on it
-            for i in range(max(lo, T - 1 - A), min(hi, T - 1) + 1):
-                by = tail[T - 1 - i]
-                source = alpha[track, off + i]
-                for m in range(M):
-                    acc[m] += source[m] * by[m]
+            # (``advance_tail``), source row T - 1 - a for a in [T - 1 - hi, T - 1 - lo]
+            rowsum[track, r] = _advance_row(alpha, track, r, max(0, T - 1 - hi),
+                                            min(A, T - 1 - lo), model.advance_tail, keep_scale)
         else:
-            for a in range(max(0, j - hi), min(A, j - lo) + 1):
-                by = advance[a]
-                source = alpha[track, r - a]
-                for m in range(M):
-                    acc[m] += source[m] * by[m]
-        target = alpha[track, r]
-        total = 0.0
-        for m in range(M):
-            v = acc[m] * keep_scale
-            target[m] = v
-            total += v
-        rowsum[track, r] = total
+            rowsum[track, r] = _advance_row(alpha, track, r, max(0, j - hi), min(A, j - lo),
+                                            advance, keep_scale)
     return top
 
 

@@ -17,6 +17,7 @@ from collections.abc import Mapping
 import numpy as np
 
 from followers import _bank_kernels
+from followers._jit import entry as compiled_entry
 from followers.bank_model import (bank_sigmas, bank_state, build_bank_model, check_size,
                                   reset_bank)
 from followers.bank_output import BankOutput, BankTrace
@@ -165,6 +166,7 @@ class FollowerBank:
             np.zeros(1, dtype=np.int64), np.zeros(1), np.zeros(1))
         self._state = forward_state(self._forward)
         self._bank = bank_state(self._model)
+        self._kernels = self._widen_args = None  # per-frame kernels (``_entries``)
         self._out = BankOutput(self)
         self.reset()
         if K >= _PROBED[0] or sum(a.size for a in arrays) >= _PROBED[1]:
@@ -290,16 +292,31 @@ class FollowerBank:
         float64 array."""
         frame = self._frame
         frame[0] = check_frame(x, self.channels)
-        _bank_kernels.bank_step(self._forward.model, self._state, self._model, self._bank,
-                                frame[0])
+        step, widen_shown = self._kernels or self._entries()
+        step(self._forward.model, self._state, self._model, self._bank, frame[0])
         self._publish(self._still_window.push(frame[0]))
         decision = self._bank.decision
         self._shown[0] = decision[0] if decision[0] >= 0 else decision[1]
         self._shown_progress[0] = self._out.progress
         self._shown_variance[0] = self._out.variance
-        self._widen(frame, self._shown, self._shown_progress, self._shown_variance)
+        if widen_shown is not None:
+            widen_shown(*self._widen_args)
         self._out.variance = float(self._shown_variance[0])
         return self._out
+
+    def _entries(self):
+        """``step``'s kernels resolved once for its own arrays (``followers._jit.entry``)."""
+        step = compiled_entry(_bank_kernels.bank_step, self._forward.model, self._state,
+                              self._model, self._bank, self._frame[0])
+        widen_shown = None
+        c = self.config.follower
+        if c.residual_cap > 1.0:
+            self._widen_args = (*self._intervals, self._shown, self._frame, self._shown_progress,
+                                self._shown_variance, c.residual_memory, c.residual_cap,
+                                min(c.outlier_sigmas, 1e300), self._interval_state)
+            widen_shown = compiled_entry(widen, *self._widen_args)
+        self._kernels = (step, widen_shown)
+        return self._kernels
 
     def _widen(self, X, shown, progress, variance) -> None:
         """``variance`` of the ``shown`` actions widened in place (``followers.intervals``)."""

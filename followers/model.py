@@ -31,7 +31,7 @@ The layout of the state (see ``_kernels`` for the algorithm):
   inside a state's cell), ``mixture (1,)`` (the weight above).
 - ``outliers (1,)``: channels of the last frame outside ``[model.lower, model.upper]`` (far
   outside what the templates span: a stuck or absurd sensor), left out like missing ones.
-- Scratch: ``xs, observed (D,)`` (the cleaned frame), ``mix (M,)``, ``residual (S,)`` (each
+- Scratch: ``xs, observed (D,)`` (the cleaned frame), ``residual (S,)`` (each
   state's capped sum of squared z-scores), ``lift (S,)`` (each state's emission over the
   frame's largest), ``sub (4, S)`` (see ``_kernels._subframe_rows``).
 """
@@ -91,7 +91,6 @@ class ForwardState(NamedTuple):
     outliers: np.ndarray
     xs: np.ndarray
     observed: np.ndarray
-    mix: np.ndarray
     residual: np.ndarray
     lift: np.ndarray
     sub: np.ndarray
@@ -251,8 +250,7 @@ def forward_state(forward: Forward) -> ForwardState:
         frame_loglik=np.zeros((3, K)), scale2=np.ones((2, K)), scale_weight=np.zeros((2, K)),
         restart=np.tile(forward.restart, (K, 1)), subframe=np.zeros(K, dtype=np.bool_),
         mixture=np.zeros(1), outliers=np.zeros(1, dtype=np.int64), xs=np.zeros(D),
-        observed=np.zeros(D), mix=np.zeros(M), residual=np.zeros(S), lift=np.zeros(S),
-        sub=np.zeros((4, S)))
+        observed=np.zeros(D), residual=np.zeros(S), lift=np.zeros(S), sub=np.zeros((4, S)))
     reset_forward(forward, state)
     return state
 

@@ -11,9 +11,10 @@ At the end a file ends the source (or loops).
 Live (a camera, or a file in real time), two threads share the work: the reader grabs every
 frame the camera delivers and keeps only the newest; the tracker thread tracks the newest frame
 it has not seen yet. A tracker slower than the camera then skips frames (counted in
-`timing()["skipped"]`) instead of falling behind, and a Frame is never older than one grab plus
-one tracking step. Nothing of this runs in the caller's thread: `read()` only takes finished
-Frames off a queue.
+`timing()["skipped"]`) instead of falling behind, and a file's reader more than LATE_FRAMES
+frames behind its schedule passes over the late ones, as a camera would drop them; a Frame is
+never older than one grab plus one tracking step. Nothing of this runs in the caller's thread:
+`read()` only takes finished Frames off a queue.
 """
 from __future__ import annotations
 
@@ -35,6 +36,7 @@ from .trackers import make_tracker
 log = logging.getLogger(__name__)
 
 TIMING_WINDOW = 60   # frames over which frame rate, latency and tracking time are reported
+LATE_FRAMES = 2      # a file read in real time this many frames late catches up by reading faster
 
 
 class CameraSource(ThreadedSource):
@@ -193,6 +195,8 @@ class CameraSource(ThreadedSource):
             self.stall_timeout = 5.0 / self.rate
         self._capture = capture
         self._index = 0
+        count = capture.get(cv2.CAP_PROP_FRAME_COUNT) if self.is_file else 0
+        self._frame_count = int(count) if count and count > 0 else None
         self._started_at = self.clock.now()
         self._held = self.is_file and self.realtime
 
@@ -214,6 +218,7 @@ class CameraSource(ThreadedSource):
             due = self._started_at + self._index / self.rate
             if not self.clock.sleep_until(due, self._stop):
                 return
+            due = self._catch_up(capture, due)
         if not capture.grab():
             if not self.is_file:
                 raise OSError(f"camera {self.device} stopped delivering frames")
@@ -246,6 +251,24 @@ class CameraSource(ThreadedSource):
                 self._skipped += 1          # the tracker had no time for the previous one
             self._waiting = (slot, t, picture_t)
             self._handoff.notify()
+
+    def _catch_up(self, capture, due: float) -> float:
+        """A file more than LATE_FRAMES frames behind its schedule passes over the frames whose
+        time has gone (grabbed, not decoded into pictures nor tracked; counted as skipped), as a
+        camera whose reader is late drops them; a frame or two late is read up without loss.
+        Returns the due time of the frame read next."""
+        behind = int((self.clock.now() - self._started_at) * self.rate) - self._index
+        if self._frame_count is not None:          # the last frame is always read
+            behind = min(behind, self._frame_count - 1 - self._index)
+        if behind <= LATE_FRAMES:
+            return due
+        for _ in range(behind):
+            if not capture.grab():
+                break                      # the end: the next grab says so
+            self._index += 1
+            self._pictures += 1
+            self._skipped += 1
+        return self._started_at + self._index / self.rate
 
     def read(self, timeout: float | None = None):
         self._asked.set()

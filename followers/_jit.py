@@ -18,6 +18,8 @@ import numba as nb
 
 FAST = {"reassoc", "contract"}
 kernel = nb.njit(cache=True, fastmath=FAST, _nrt=False)
+# set-up work that must give exactly NumPy's results (no fused multiply-adds)
+plain = nb.njit(cache=True, _nrt=False)
 inline = nb.njit(cache=True, fastmath=FAST, _nrt=False, inline="always")
 
 

@@ -28,7 +28,7 @@ import math
 import numpy as np
 
 from followers._cells import subframe_moments, subframe_rows
-from followers._jit import inline, kernel
+from followers._jit import inline, kernel, plain
 
 
 @inline
@@ -741,3 +741,20 @@ def tempo_calibrate(progress, variance, span, tempo, state):
         state[1] = keep * state[1] + gain * advance
         value = min(max(state[1], lowest), highest)
         variance[n] *= value ** exponent
+
+
+@plain
+def upsample_into(values, factor, out):
+    """``out (factor (T - 1) + 1, D)`` := ``values (T, D)`` linearly interpolated, ``factor``
+    rows per row, the original rows kept; NumPy's ``(1 - w) a + w b``, in one pass."""
+    T, D = values.shape
+    for t in range(T - 1):
+        base = factor * t
+        for d in range(D):
+            out[base, d] = values[t, d]
+        for r in range(1, factor):
+            w = r / factor
+            for d in range(D):
+                out[base + r, d] = (1.0 - w) * values[t, d] + w * values[t + 1, d]
+    for d in range(D):
+        out[factor * (T - 1), d] = values[T - 1, d]

@@ -42,6 +42,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from followers._kernels import upsample_into
 from followers.transitions import TransitionModel
 
 
@@ -117,10 +118,7 @@ def upsample(values: np.ndarray, factor: int) -> np.ndarray:
     """(T, D) -> (factor * (T - 1) + 1, D): linear interpolation, original frames kept."""
     T, D = values.shape
     out = np.empty((factor * (T - 1) + 1, D))
-    out[::factor] = values
-    for r in range(1, factor):
-        w = r / factor
-        out[r::factor] = (1.0 - w) * values[:-1] + w * values[1:]
+    upsample_into(values, factor, out)
     return out
 
 

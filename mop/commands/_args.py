@@ -130,3 +130,37 @@ class WorkEstimate:
                   f"frames ({done / elapsed:.3g} frames/s); Ctrl-C stops and keeps what is "
                   f"done", file=self.stream, flush=True)
         return left
+
+
+def kernels_compiled(packages=("characters", "followers")) -> bool:
+    """True when numba's cache holds compiled kernels of every package named (its index files
+    beside the sources, or under NUMBA_CACHE_DIR when that is set)."""
+    import hashlib
+    import importlib.util
+    import os
+    from pathlib import Path
+
+    root = os.environ.get("NUMBA_CACHE_DIR")
+    for name in packages:
+        spec = importlib.util.find_spec(name)
+        if spec is None or not spec.submodule_search_locations:
+            continue
+        folder = os.path.abspath(next(iter(spec.submodule_search_locations)))
+        if root:        # numba's layout there: FOLDERNAME_sha1(absolute folder)
+            where = Path(root) / (os.path.basename(folder) + "_"
+                                  + hashlib.sha1(folder.encode()).hexdigest())
+        else:
+            where = Path(folder) / "__pycache__"
+        if not any(where.glob("*.nbi")):
+            return False
+    return True
+
+
+def say_if_kernels_compile(stream=None) -> bool:
+    """Say first that this run compiles the kernels (a fresh install: minutes, once)."""
+    import sys
+    if kernels_compiled():
+        return False
+    print("first run: compiling mop's simulation and follower kernels, once; this takes 2-3 "
+          "minutes on a laptop, later runs start at once", file=stream or sys.stderr, flush=True)
+    return True

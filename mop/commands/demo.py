@@ -76,7 +76,10 @@ def run(args) -> int:
     from mop.session import Mode, load_session
     from mop.session.build import Overrides
 
+    from mop.commands._args import say_if_kernels_compile
+
     started = time.monotonic()
+    say_if_kernels_compile()
     config = load_session(args.session or demo_session_path())
     extra = []
     if args.still:

@@ -150,7 +150,10 @@ def run(args) -> int:
     from mop.session.build import Overrides
     from mop.session.config import REPLAY_PREFIX, parse_host_port
 
+    from mop.commands._args import say_if_kernels_compile
+
     config = with_calibrations(load_session(args.session), args.calibration)
+    say_if_kernels_compile()
     replay = parse_replay(args.replay)
     names = [p.name for p in config.performers]
     for performer in replay:

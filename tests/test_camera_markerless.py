@@ -268,14 +268,21 @@ def test_a_calibration_take_from_a_camera_names_what_the_camera_did_not_see(tmp_
     assert 'calibration = "ana-calibration-001"' in out
     assert re.search(r"\n  lean +rest .* range ", out)
     unseen = re.findall(r"\n  (\S+) +not calibrated: .*fewer than", out)
-    assert "wrist_left" in unseen and "lean" not in unseen
     take = TakeStore(folder).load("ana-calibration-001")
     assert len(take.times) >= 0.9 * len(angles)      # the file read to its end
+    # the report names exactly the channels the take holds too few values of (whether the pose
+    # model places a wrist just inside the picture varies between runs), never the lean
+    finite = np.isfinite(np.asarray(take.values)).sum(axis=0)
+    short = [name for name, n in zip(take.channels, finite) if n < 3]
+    assert sorted(unseen) == sorted(short) and "lean" not in unseen
     lean = calibration_of(take, ["lean"])
     assert lean.high[0] - lean.low[0] > 25            # [deg]: the picture leant +-20
-    # a session's performer bound to channels the take did not see is told which
-    with pytest.raises(Exception, match="fewer than .* 'wrist_left'"):
-        calibration_of(take, ["lean", "wrist_left"])
+    # a session's performer bound to a channel the take did not see is told which
+    unseen_channel = short[0] if short else "elbow_left"
+    if not short:                                      # the model saw everything: hide one
+        take.stream.values[:, take.channels.index(unseen_channel)] = np.nan
+    with pytest.raises(Exception, match=f"fewer than .* '{unseen_channel}'"):
+        calibration_of(take, ["lean", unseen_channel])
 
 
 def test_a_glove_performer_takes_a_camera_as_it_is(tmp_path):

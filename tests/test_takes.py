@@ -134,6 +134,45 @@ def test_recorder_writes_while_capturing(tmp_path):
     assert take.extra["clock_start"] == 100.0
 
 
+def test_a_take_keeps_its_frames_that_a_late_tracker_delivers_after_the_end(tmp_path):
+    from capture import Frame, Status
+    from capture.source import Source
+    from mop.commands.record import _capture
+
+    class Ticking:
+        """A clock that moves 1 ms each time it is read."""
+        t = 0.0
+
+        def now(self):
+            self.t += 0.001
+            return self.t
+
+    class LateTracker(Source):
+        """Frames at 100 Hz, each readable 0.3 s after its own time (a tracker behind)."""
+        status = Status.OK
+
+        def __init__(self, clock):
+            super().__init__(("x",), 100.0, clock=clock)
+            self.frames = [Frame(k / 100.0, [k / 100.0]) for k in range(400)]
+
+        def read(self, timeout=None):
+            if self.frames and self.frames[0].t + 0.3 <= self.clock.now():
+                return self.frames.pop(0)
+            return None
+
+    source = LateTracker(Ticking())
+    store = TakeStore(tmp_path)
+    with store.record(performer="ana", action="wave", motion=motion(1.0), rate=100.0,
+                      device="test", channels=["x"], start=0.5) as recorder:
+        _capture(source, recorder, start=0.5, duration=1.0, label="wave")
+        name = recorder.finish(alignment={"method": "duration", "action_start": 0.0,
+                                          "action_end": 1.0})
+    take = store.load(name)
+    # every frame of [0.5, 1.5], the last 0.3 s of them read after the take's end
+    np.testing.assert_allclose(take.times, np.arange(101) / 100.0, atol=1e-9)
+    np.testing.assert_allclose(take.values[:, 0], 0.5 + np.arange(101) / 100.0, atol=1e-9)
+
+
 def test_a_damaged_take_gives_an_error_and_a_salvage(tmp_path, rng):
     store = TakeStore(tmp_path)
     times = np.arange(6000) * 0.01

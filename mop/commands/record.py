@@ -26,6 +26,7 @@ PREVIEW_FPS = 25
 MAX_TAKE_SECONDS = 600.0    # a demonstration is seconds long; a longer motion is a mistake
 CALIBRATION_SECONDS = 8.0   # a calibration take: the rest pose, then the range
 REST_SECONDS = 2.0          # its rest part (followers.calibration.REST_SECONDS)
+LATE_SECONDS = 2.0          # how long after the end a take waits for frames of its time
 
 
 def register(subparsers) -> None:
@@ -387,13 +388,28 @@ def _capture(source, recorder, start: float, duration: float | None, label: str)
             if duration is not None:
                 raise
             end = clock.now()             # a show recorded until Ctrl-C ends here
-        # frames that arrived by the end but were still queued
-        while (frame := source.read(timeout=0)) is not None:
-            if start <= frame.t <= end:
-                recorder.append_frame(frame, channels=source.channels)
+        _late_frames(source, recorder, start, end)
         progress.set_postfix_str(f"frames {recorder.frames}", refresh=False)
         progress.n = duration if duration is not None else end - start
         progress.refresh()
+
+
+def _late_frames(source, recorder, start: float, end: float) -> None:
+    """Append the frames of the take that arrive after its end: a tracker running behind (a
+    camera on a busy machine) delivers them late. Reads until a frame from after the end
+    arrives, the source ends, or LATE_SECONDS pass."""
+    import time
+    deadline = time.monotonic() + LATE_SECONDS
+    while time.monotonic() < deadline:
+        frame = source.read(timeout=0.05)
+        if frame is None:
+            if source.ended:
+                return
+            continue
+        if frame.t > end:
+            return
+        if frame.t >= start:
+            recorder.append_frame(frame, channels=source.channels)
 
 
 def _countdown(source, seconds: float, action: str) -> float:
@@ -414,8 +430,7 @@ def _countdown(source, seconds: float, action: str) -> float:
 
 def _record(args) -> int:
     from capture import open_source
-    from mop.takes import (CALIBRATION_ACTION, CALIBRATION_KEY, TakeStore, check_name,
-                           performer_templates)
+    from mop.takes import CALIBRATION_ACTION, CALIBRATION_KEY, TakeStore, check_name
 
     action = args.action or ("show" if args.show else
                              CALIBRATION_ACTION if args.calibrate else None)
@@ -429,15 +444,7 @@ def _record(args) -> int:
     source = open_source(args.source)
     recorder = None
     try:
-        first = source.read(timeout=args.wait)
-        if first is None:
-            raise OSError(f"{args.source}: no frame within {args.wait:g} s (status "
-                          f"{source.status.value}); is the performer's input running?")
-        names = ", ".join(source.channels[:8]) + (", ..." if len(source.channels) > 8 else "")
-        print(f"source {args.source}: {count(len(source.channels), 'channel')} ({names})")
-        if getattr(source, "smoothing", None) is not None:
-            print("  note: smoothing is on; the take keeps smoothed values, not raw ones "
-                  "(leave smooth off to record raw takes)")
+        _greet(source, args)
         start = _countdown(source, args.countdown, action)
         info = source.describe()
         # what later processing of this take needs to interpret its numbers
@@ -487,6 +494,27 @@ def _record(args) -> int:
         raise
     finally:
         source.close()
+
+    return _report_take(args, store, name, motion, stats)
+
+
+def _greet(source, args) -> None:
+    """Wait for the source's first frame, then say what it delivers."""
+    first = source.read(timeout=args.wait)
+    if first is None:
+        raise OSError(f"{args.source}: no frame within {args.wait:g} s (status "
+                      f"{source.status.value}); is the performer's input running?")
+    names = ", ".join(source.channels[:8]) + (", ..." if len(source.channels) > 8 else "")
+    print(f"source {args.source}: {count(len(source.channels), 'channel')} ({names})")
+    if getattr(source, "smoothing", None) is not None:
+        print("  note: smoothing is on; the take keeps smoothed values, not raw ones "
+              "(leave smooth off to record raw takes)")
+
+
+def _report_take(args, store, name, motion, stats) -> int:
+    """What was stored, then the calibration's report, or how the take agrees with the
+    performer's other takes of its action and how it could be confused with other actions."""
+    from mop.takes import performer_templates
 
     take = store.load(name)
     missing = int(take.values.size - (take.values == take.values).sum())

@@ -79,16 +79,25 @@ def parse_pins(pins, where: str) -> dict:
 
 
 def run(args) -> int:
-    import numpy as np
     from PIL import Image
-    from tqdm import tqdm
 
-    from characters import ImagePuppet, Motion
-    from mop.export import open_writer
-    from mop.render.image2d import ImageRenderer, puppet_preview
-    from mop.commands._args import WorkEstimate, check_frame_budget
-    from mop.sidecars import read_json
+    from mop.render.image2d import puppet_preview
 
+    _check_arguments(args)
+    motion, pins = _motion_and_pins(args)
+    puppet = _build(args, pins)
+    if args.show_mesh is not None:
+        path = (Path(args.image.stem + ".mesh.png") if args.show_mesh is True
+                else args.show_mesh)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        Image.fromarray(puppet_preview(puppet)).save(path)
+        print(f"wrote mesh preview {path}")
+    if args.out is not None:
+        _render_motion(args, puppet, motion)
+    return 0
+
+
+def _check_arguments(args) -> None:
     if args.out is None and args.show_mesh is None:
         raise ValueError("nothing to do: give --out OUT (with --motion) and/or --show-mesh PNG")
     if args.out is not None and args.motion is None:
@@ -97,6 +106,13 @@ def run(args) -> int:
         raise ValueError(f"--fps must be > 0, got {args.fps}")
     if args.auto_pins and args.pins is not None:
         raise ValueError("give either --auto-pins or --pins PINS.json, not both")
+
+
+def _motion_and_pins(args):
+    """The motion (or None) and the pins: --pins, else the motion file's 'pins', else the
+    image's sidecar; None when the pins are to be proposed."""
+    from characters import Motion
+    from mop.sidecars import read_json
 
     motion = None
     pins = None
@@ -115,6 +131,12 @@ def run(args) -> int:
         raise ValueError(f"the motion drives pins {motion.channel_names} but no pin positions "
                          f"were given: use --auto-pins, --pins PINS.json, a 'pins' section in "
                          f"the motion file, or {args.image.stem}.pins.json next to the image")
+    return motion, pins
+
+
+def _build(args, pins):
+    """The puppet from the picture, with the pins given or proposed; says what it found."""
+    from characters import ImagePuppet
 
     started = time.perf_counter()
     puppet = ImagePuppet.from_image(args.image, cell_size=args.cell_size,
@@ -126,7 +148,6 @@ def run(args) -> int:
     proposed = pins is None and (args.auto_pins or args.out is None)
     if proposed:
         puppet.add_auto_pins()
-    height, width = puppet.mask.shape
     print(f"built {puppet} in {time.perf_counter() - started:.2f} s (found as {puppet.kind})")
     for note in puppet.notes:
         print(f"note: {note}")
@@ -136,15 +157,17 @@ def run(args) -> int:
                            for name, pin in puppet.pins.items())
         print(f"{'automatic pins' if args.auto_pins else 'pins --auto-pins would use'}: "
               f"{listed}")
+    return puppet
 
-    if args.show_mesh is not None:
-        path = (Path(args.image.stem + ".mesh.png") if args.show_mesh is True
-                else args.show_mesh)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        Image.fromarray(puppet_preview(puppet)).save(path)
-        print(f"wrote mesh preview {path}")
-    if args.out is None:
-        return 0
+
+def _render_motion(args, puppet, motion) -> None:
+    """Simulate the puppet along the motion and write every frame to --out."""
+    import numpy as np
+    from tqdm import tqdm
+
+    from mop.commands._args import WorkEstimate, check_frame_budget
+    from mop.export import open_writer
+    from mop.render.image2d import ImageRenderer
 
     puppet.check_motion(motion)
     duration = motion.duration if args.duration is None else float(args.duration)
@@ -153,6 +176,7 @@ def run(args) -> int:
     frame_count = int(np.floor(duration * args.fps + 1e-9)) + 1
     check_frame_budget(frame_count, fps=args.fps, limit=args.max_frames)
     estimate = WorkEstimate(frame_count, f"rendering {args.out}")
+    height, width = puppet.mask.shape
     renderer = ImageRenderer(puppet.image, puppet.vertices, puppet.triangles,
                              size=(width, height), background=args.background or "transparent")
     frame = np.empty((height, width, 4), np.uint8)
@@ -166,10 +190,7 @@ def run(args) -> int:
         for index in range(frame_count):
             tick = time.perf_counter()
             targets = motion.sample(index / args.fps)
-            if index == 0:
-                if puppet.mode.value == "arap":
-                    puppet.step(1.0 / args.fps, targets)
-            else:
+            if index > 0 or puppet.mode.value == "arap":
                 puppet.step(1.0 / args.fps, targets)
             tock = time.perf_counter()
             renderer.render_into(puppet.state.x, frame)
@@ -181,4 +202,3 @@ def run(args) -> int:
     print(f"wrote {args.out}: {frame_count} frames {width}x{height} at {args.fps:g} fps "
           f"(simulation {1e3 * simulate_time / frame_count:.2f} ms/frame, render+encode "
           f"{1e3 * render_time / frame_count:.2f} ms/frame)")
-    return 0

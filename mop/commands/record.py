@@ -374,8 +374,8 @@ def _capture(source, recorder, start: float, duration: float | None, label: str)
                 frame = source.read(timeout=min(0.05, max(end - now, 0.001)))
                 if frame is not None and start <= frame.t <= end:
                     recorder.append_frame(frame, channels=source.channels)
-                elif frame is None and duration is None and source.ended:
-                    end = clock.now()      # a file or a take played to its end ends the show
+                elif frame is None and source.ended:
+                    end = clock.now()      # a file or a take played to its end ends the take
                     break
                 elapsed = clock.now() - start
                 rate = getattr(source, "frame_rate", None)   # a camera: what its tracker keeps up
@@ -390,8 +390,11 @@ def _capture(source, recorder, start: float, duration: float | None, label: str)
             end = clock.now()             # a show recorded until Ctrl-C ends here
         _late_frames(source, recorder, start, end)
         progress.set_postfix_str(f"frames {recorder.frames}", refresh=False)
-        progress.n = duration if duration is not None else end - start
+        progress.n = min(end - start, duration if duration is not None else end - start)
         progress.refresh()
+    if duration is not None and end < start + duration:
+        print(f"  the source ended after {end - start:.2f} of {duration:.2f} s; the take holds "
+              f"what it sent", flush=True)
 
 
 def _late_frames(source, recorder, start: float, end: float) -> None:

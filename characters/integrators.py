@@ -227,6 +227,7 @@ class Integrator:
             delta = (control.pin_position - start) / substeps
         iterations = 0
         for s in range(substeps):
+            self._begin_substep(state, (s + 1) / substeps, h)
             if pins.size:
                 goal = start + delta * (s + 1)
                 iterations += self._advance(model, state, h, control, goal)
@@ -236,6 +237,10 @@ class Integrator:
                 constraint.apply(state.x, state.v, h, scratch.inverse_mass,
                                  centers=control.constraint_centers.get(constraint.name))
         return iterations
+
+    def _begin_substep(self, state, fraction: float, h: float) -> None:
+        """Hook: called before each substep of h [s] with the share of the step done at its
+        end (1 for the last); subclasses move what the step carries kinematically."""
 
     def _advance(self, model, state, h, control, pin_goal) -> int:
         raise NotImplementedError

@@ -129,10 +129,13 @@ def scatter_rows(si, sj, fx, fy, fz, out):
 
 @njit(**_JIT)
 def _elastic_magnitudes(ex, ey, ez, rest, k):
-    """e := (k (1 - r / l)) e in place, e = (ex, ey, ez) rows; zero-length springs give zero."""
+    """e := (k (1 - r / l)) e in place, e = (ex, ey, ez) rows; zero-length springs give zero.
+    The same arithmetic as _damped_magnitudes without its damping term, so an undamped model
+    gets the same forces from either."""
     for s in range(ex.shape[0]):
         length2 = ex[s] * ex[s] + ey[s] * ey[s] + ez[s] * ez[s]
-        mag = k[s] - k[s] * rest[s] / np.sqrt(length2) if length2 > 0.0 else 0.0
+        inv = 1.0 / np.sqrt(length2) if length2 > 0.0 else 0.0
+        mag = k[s] * (1.0 - rest[s] * inv)
         ex[s] *= mag
         ey[s] *= mag
         ez[s] *= mag

@@ -76,7 +76,8 @@ class SpringPlan:
     per model (MassSpring.plan); read-only except the scratch.
 
     si, sj : (M,) uint32; order : (M,) int64 [plan position -> model spring index];
-    rest_length, stiffness, damping : (M,) float64 in plan order; scratch : (6, C) float64.
+    rest_length, stiffness, damping : (M,) float64 in plan order; damped : any damping > 0;
+    scratch : (6, C) float64.
     The kernels' sums do not depend on the order; sorting makes them fast. A model stepped
     from two threads at once would share the scratch: give each thread its own model.
     """
@@ -92,6 +93,7 @@ class SpringPlan:
         self.rest_length = _readonly(np.ascontiguousarray(model.rest_length[order]))
         self.stiffness = _readonly(np.ascontiguousarray(model.stiffness[order]))
         self.damping = _readonly(np.ascontiguousarray(model.damping[order]))
+        self.damped = bool(self.damping.any())
         self.scratch = np.empty((6, max(1, min(len(order), kernels.SPLIT_CHUNK))))
 
     def take(self, values: np.ndarray) -> np.ndarray:
@@ -285,8 +287,12 @@ class MassSpring:
         (N, d) float64: the split kernels over the plan in 3D, the fused loop in 2D."""
         if self.dim == 3:
             plan = self.plan
-            kernels.spring_forces_3d(x, v, plan.si, plan.sj, plan.rest_length, plan.stiffness,
-                                     plan.damping, plan.scratch, out)
+            if plan.damped:
+                kernels.spring_forces_3d(x, v, plan.si, plan.sj, plan.rest_length,
+                                         plan.stiffness, plan.damping, plan.scratch, out)
+            else:  # no spring has a damper: velocities need not be gathered
+                kernels.spring_forces_elastic_3d(x, plan.si, plan.sj, plan.rest_length,
+                                                 plan.stiffness, plan.scratch, out)
         else:
             kernels.spring_forces(x, v, self.springs, self.rest_length, self.stiffness,
                                   self.damping, out)

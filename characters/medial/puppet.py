@@ -36,6 +36,7 @@ from ..integrators import Verlet
 from ..model import MassSpring
 from . import joints as joint_kernels
 from .constraints import BoneSpringReduction
+from .frame import FrameArrays, run_substeps
 from .joints import JointCut, JointSpec, JointTree
 from .mesh_input import MAX_FACES, load_closed_mesh
 from .skeleton import Skeleton, skeletonize
@@ -230,9 +231,9 @@ class MedialObject:
 
         self.max_substep = _stable_substep(self.model, dyn, node_mass)   # [s]
         self.fixed_substeps = substeps
-        self.integrator = Verlet(substeps=1, check_energy=False)
 
         self._prepare_joints(positions, rest, fixed, dyn, constraints)
+        self.integrator = _PosedVerlet(self, check_energy=False)
         for array in (self.rest_vertices, self.skeleton, self.bone_rest_length,
                       self.dynamic_vertices, self.kinematic_vertices):
             array.setflags(write=False)
@@ -246,11 +247,12 @@ class MedialObject:
         self._kinematic_section = np.ascontiguousarray(section_of_node[self._kinematic_nodes])
         self._dynamic_rest = np.ascontiguousarray(rest[dyn])
         self._dynamic_section = np.ascontiguousarray(joints.section_of_vertex[dyn])
-        self._centers = np.empty_like(self._dynamic_rest)
+        self._centers = self._dynamic_rest.copy()  # posed each substep; finite from the start
         section_count = len(joints.names)
         self._rotvec = np.zeros((section_count, 3))
         self._rotvec_start = np.zeros((section_count, 3))
         self._rotvec_sub = np.zeros((section_count, 3))
+        self._rotvec_goal = np.zeros((section_count, 3))
         self._rotations = np.repeat(np.eye(3)[None], section_count, axis=0)
         self._translations = np.zeros((section_count, 3))
         centers = {c.name: self._centers for c in constraints
@@ -385,17 +387,20 @@ class MedialObject:
             raise ValueError(f"dt must be a finite time step > 0 [s], got {dt}")
         goal = self.rotation_vectors(targets)
         self._rotvec_start[...] = self._rotvec
-        substeps = self.substeps_for(dt)
-        h = dt / substeps
-        for k in range(1, substeps + 1):
-            fraction = k / substeps
-            np.multiply(goal - self._rotvec_start, fraction, out=self._rotvec_sub)
-            self._rotvec_sub += self._rotvec_start
-            self._pose_bones(self._rotvec_sub, h)
-            self.integrator.step(self.model, self.state, h, self._control)
+        self._rotvec_goal[...] = goal
+        # one integrator step of `substeps` substeps; each first poses the bones (_PosedVerlet)
+        self.integrator.substeps = self.substeps_for(dt)
+        self.integrator.step(self.model, self.state, dt, self._control)
         self._rotvec[...] = goal
 
     # internals ------------------------------------------------------------------------------------
+    def _pose_at(self, fraction: float, h: float) -> None:
+        """Pose the bones `fraction` of the way from the step's start angles to its goal."""
+        np.subtract(self._rotvec_goal, self._rotvec_start, out=self._rotvec_sub)
+        self._rotvec_sub *= fraction
+        self._rotvec_sub += self._rotvec_start
+        self._pose_bones(self._rotvec_sub, h)
+
     def _pose_bones(self, rotation_vectors, h: float) -> None:
         """Move kinematic nodes and constraint centres to the pose; bone velocities = motion / h."""
         joint_kernels.section_transforms(self.joints, rotation_vectors, self._rotations,
@@ -421,6 +426,33 @@ class MedialObject:
         return (f"MedialObject({self.vertex_count} vertices, {self.model.spring_count} springs, "
                 f"material={self.material.name!r}, constraint={self.constraint.value!r}, "
                 f"sections={list(self.joints.names)})")
+
+
+class _PosedVerlet(Verlet):
+    """Verlet stepping a medial object: each substep first carries its bones to the pose that
+    substep ends at, so one integrator step covers a whole frame (one set of checks per frame,
+    not per substep). With the circumsphere constraint the substeps run in one compiled call
+    (`frame.run_substeps`, the same kernels in the same order, Python's lock released)."""
+
+    def __init__(self, puppet: MedialObject, **options):
+        super().__init__(**options)
+        self._pose = puppet._pose_at
+        spheres = [c for c in puppet.model.constraints if isinstance(c, CircumsphereConstraint)]
+        compiled = len(spheres) == len(puppet.model.constraints) == 1
+        self._frame = FrameArrays.of(puppet, spheres[0]) if compiled else None
+
+    def _begin_substep(self, state, fraction: float, h: float) -> None:
+        self._pose(fraction, h)
+
+    def _run(self, model, state, dt, control, substeps, scratch) -> int:
+        plain = (control.pin_index.size or control.target_index.size
+                 or control.force_index.size)
+        if self._frame is None or plain or self._frame.body.mass is not model.mass:
+            return super()._run(model, state, dt, control, substeps, scratch)
+        h = dt / substeps
+        run_substeps(self._frame, state.x, state.v, substeps, h,
+                     math.exp(-model.velocity_damping * h))
+        return 0
 
 
 def _bone_constraints(constraint, material, dyn, vertex_count, bone_rest, iterations) -> list:

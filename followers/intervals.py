@@ -14,9 +14,11 @@ window (``FollowerConfig.residual_memory`` frames; each residual clipped at
 ``outlier_sigmas``) estimates its lag-one autocorrelation
 ``rho``; the variance is multiplied by ``(1 + rho) / (1 - rho)`` (the variance of a mean of
 AR(1) samples against independent ones) and by the residual's mean square where it exceeds 1
-(a performer further from the template than its sigma says), at most ``residual_cap``.
-Independent residuals within the sigma (the demonstration replayed) leave the interval as it
-was.
+(a performer further from the template than its sigma says), at most ``residual_cap``. The
+mean square is the window's average over the frames seen so far (the exponential average
+divided by its weights' sum), so the first frames of a performance count in full rather than
+as if preceded by a perfect fit. Independent residuals within the sigma (the demonstration
+replayed) leave the interval as it was.
 """
 from __future__ import annotations
 
@@ -27,8 +29,9 @@ import numpy as np
 
 # the autocorrelation is clipped to [0, RHO_MAX]
 RHO_MAX = 0.95
-# state layout: lag-one sum, lag-zero sum, then the previous residual per channel
-_HEAD = 2
+# state layout: lag-one sum, lag-zero sum, the weights' sum, then the previous residual per
+# channel
+_HEAD = 3
 
 
 def interval_state(channels: int) -> np.ndarray:
@@ -41,6 +44,7 @@ def interval_state(channels: int) -> np.ndarray:
 def reset_interval(state: np.ndarray) -> None:
     state[0] = 0.0
     state[1] = 1e-9
+    state[2] = 0.0
     state[_HEAD:] = 0.0
 
 
@@ -72,21 +76,23 @@ def widen(templates, sigmas, offsets, which, X, progress, variance, memory, cap,
         for d in range(D):
             x = X[n, d]
             if not math.isfinite(x):
-                state[2 + d] = 0.0
+                state[_HEAD + d] = 0.0
                 continue
             a = start + low
             expected = (1.0 - w) * templates[a, d] + w * templates[a + 1, d]
             scale = (1.0 - w) * sigmas[a, d] + w * sigmas[a + 1, d]
             r = min(max((x - expected) / scale, -clip), clip)
-            lag1 += r * state[2 + d]
+            lag1 += r * state[_HEAD + d]
             lag0 += r * r
-            state[2 + d] = r
+            state[_HEAD + d] = r
             seen += 1
         if seen > 0:
             state[0] = decay * state[0] + (1.0 - decay) * lag1 / seen
             state[1] = decay * state[1] + (1.0 - decay) * lag0 / seen
+            state[2] = decay * state[2] + (1.0 - decay)
         rho = min(max(state[0] / state[1], 0.0), RHO_MAX)
-        variance[n] *= min(cap, (1.0 + rho) / (1.0 - rho) * max(1.0, state[1]))
+        square = state[1] / state[2] if state[2] > 0.0 else 0.0
+        variance[n] *= min(cap, (1.0 + rho) / (1.0 - rho) * max(1.0, square))
 
 
 def stacked(templates, sigmas):

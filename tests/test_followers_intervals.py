@@ -12,7 +12,7 @@ def slow_widen(template, sigma, X, progress, variance, memory, cap, clip):
     """The rule of ``followers.intervals`` written out plainly, one template."""
     out = variance.copy()
     decay = math.exp(-1.0 / memory)
-    lag1, lag0 = 0.0, 1e-9
+    lag1, lag0, weights = 0.0, 1e-9, 0.0
     previous = np.zeros(X.shape[1])
     T = len(template)
     for n in range(len(X)):
@@ -27,9 +27,10 @@ def slow_widen(template, sigma, X, progress, variance, memory, cap, clip):
         if seen.any():
             lag1 = decay * lag1 + (1 - decay) * float(np.sum(r * previous)) / seen.sum()
             lag0 = decay * lag0 + (1 - decay) * float(np.sum(r * r)) / seen.sum()
+            weights = decay * weights + (1 - decay)
         previous = r
         rho = min(max(lag1 / lag0, 0.0), 0.95)
-        out[n] *= min(cap, (1 + rho) / (1 - rho) * max(1.0, lag0))
+        out[n] *= min(cap, (1 + rho) / (1 - rho) * max(1.0, lag0 / weights))
     return out
 
 
@@ -51,6 +52,8 @@ def test_widen_is_the_plain_rule(rng):
 
 
 def test_independent_residuals_beyond_the_sigma_widen_by_their_mean_square(rng):
+    """... from the first frames: the mean square counts the frames seen so far, not a window
+    preceded by a perfect fit."""
     template = np.sin(np.linspace(0, 6, 200))[:, None] * np.ones((1, 2))
     sigma = np.full((200, 2), 0.1)
     X = template + rng.normal(scale=0.3, size=(200, 2))      # 3 sigmas: 9x the variance
@@ -58,6 +61,7 @@ def test_independent_residuals_beyond_the_sigma_widen_by_their_mean_square(rng):
     widen(*stacked([template], [sigma]), np.zeros(200, dtype=np.int64), X,
           np.linspace(0, 1, 200), variance, 20.0, 20.0, 5.0, interval_state(2))
     assert 5e-4 < np.median(variance[40:]) < 1.3e-3
+    assert 4e-4 < np.median(variance[2:10]) < 1.5e-3
 
 
 def test_independent_residuals_leave_the_interval_alone(rng):

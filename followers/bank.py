@@ -27,7 +27,7 @@ from followers.demos import Demonstrations, combine
 from followers.follower import Follower, adaptation, chain, resolve_config
 from followers.model import build_forward, check_frame, forward_state, reset_forward
 from followers.intervals import interval_state, reset_interval, stacked, widen
-from followers.still import StillWindow, build_still, holds_no_action, still_mask
+from followers.still import RELEASE, StillState, StillWindow, build_still, judge, still_mask
 
 
 log = logging.getLogger(__name__)
@@ -158,6 +158,7 @@ class FollowerBank:
         self._still = build_still(arrays, [list(a.takes) for a in actions], config.still_frames,
                                   config.still_band, config.end_fraction)
         self._still_window = StillWindow(self._still, arrays[0].shape[1])
+        self._still_state = StillState()
         # the shown variance widened by the residual's autocorrelation (followers.intervals)
         self._intervals = stacked(arrays, sigmas)
         self._interval_state = interval_state(arrays[0].shape[1])
@@ -281,6 +282,7 @@ class FollowerBank:
         self._state.mixture[0] = self._model.mixture_start
         _bank_kernels.gate(self._state, self._model, self._bank, -1)
         self._still_window.reset()
+        self._still_state.reset()
         reset_interval(self._interval_state)
         self._publish()
 
@@ -294,7 +296,8 @@ class FollowerBank:
         frame[0] = check_frame(x, self.channels)
         step, widen_shown = self._kernels or self._entries()
         step(self._forward.model, self._state, self._model, self._bank, frame[0])
-        self._publish(self._still_window.push(frame[0]))
+        self._still_window.push(frame[0])
+        self._publish(judged=True)
         decision = self._bank.decision
         self._shown[0] = decision[0] if decision[0] >= 0 else decision[1]
         self._shown_progress[0] = self._out.progress
@@ -325,13 +328,18 @@ class FollowerBank:
             widen(*self._intervals, shown, X, progress, variance, c.residual_memory,
                   c.residual_cap, min(c.outlier_sigmas, 1e300), self._interval_state)
 
-    def _publish(self, still: bool = False) -> None:
+    def _publish(self, judged: bool = False, quiet: bool = False) -> None:
+        """The output from the bank's state; ``judged``: the still stage judges this frame
+        (``followers.still``); ``quiet``: it showed no action for it already."""
         out, decision = self._out, self._bank.decision
         active = int(decision[0])
         shown = active if active >= 0 else int(decision[1])
-        if still and active >= 0 and holds_no_action(
-                self._still, active, float(self._bank.progress[active])):
-            active = -1  # still input (followers.still): shown as no action
+        if judged:
+            window = self._still_window
+            active = judge(self._still, self._still_state, window.entry, window.held, active,
+                           float(self._bank.progress[max(active, 0)]))
+        elif quiet:
+            active = -1
         out.action = self._names[active] if active >= 0 else None
         out.index = active
         out.best = self._names[int(decision[1])]
@@ -356,16 +364,24 @@ class FollowerBank:
                                trace)
         shown = np.where(trace.action >= 0, trace.action, np.argmax(trace.posteriors, axis=1))
         self._widen(arr, shown, trace.progress, trace.variance)
-        still = still_mask(arr, self._still.frames, self._still.band)
-        for i in np.flatnonzero(still):
-            if trace.action[i] >= 0 and holds_no_action(self._still, int(trace.action[i]),
-                                                         float(trace.progress[i])):
-                trace.action[i] = -1
+        self._judge_still(arr, trace)
         self._still_window.load(arr)
-        self._publish(bool(still[-1]) if still.size else False)
+        self._publish(quiet=bool(arr.shape[0]) and trace.action[-1] < 0)
         if arr.shape[0]:
             self._out.variance = float(trace.variance[-1])
         return trace._asdict()
+
+    def _judge_still(self, X, trace) -> None:
+        """The still stage over a traced performance ``X (N, D)``: ``trace.action`` set to -1
+        where still input shows no action (as ``step`` would, frame by frame)."""
+        model = self._still
+        if model.frames < 1:
+            return
+        entry = still_mask(X, model.frames, model.band)
+        held = still_mask(X, model.frames, RELEASE * model.band)
+        for i in range(X.shape[0]):
+            trace.action[i] = judge(model, self._still_state, bool(entry[i]), bool(held[i]),
+                                    int(trace.action[i]), float(trace.progress[i]))
 
     def __repr__(self) -> str:
         return (f"FollowerBank({len(self._names)} actions: {', '.join(self._names)}; "

@@ -106,3 +106,36 @@ def test_a_slow_turning_point_is_not_taken_for_a_stop(rng, speed):
     action = bank.follow(performance)["action"]
     middle = action[len(action) // 4: 3 * len(action) // 4]
     assert np.all(middle == 0)
+
+
+def test_a_swaying_hold_stays_no_action(actions, rng):
+    """A performer standing after the wave sways now and then by more than the band but
+    within ``RELEASE`` times it: once shown as no action, the hold stays no action."""
+    frames = 10
+    bank = FollowerBank(actions, config=BankConfig(still_frames=frames))
+    band = bank._still.band
+    hold = noisy(np.repeat(actions["wave"][-1:], 80, axis=0), rng)
+    sway = np.zeros(80)
+    sway[30:36] = sway[55:60] = 1.5 * band[0]       # beyond the band, within 2x
+    hold[:, 0] += sway
+    performance = np.vstack([noisy(actions["wave"], rng), hold])
+    assert not still_mask(performance, frames, band)[100 + 30:100 + 70].all()
+    shown = bank.follow(performance)["action"]
+    assert np.all(shown[100 + frames:] == -1), shown[100:]
+    bank.reset()
+    np.testing.assert_array_equal([bank.step(x).index for x in performance], shown)
+
+
+def test_a_pause_held_far_longer_than_demonstrated_is_no_action(actions, rng):
+    """The "turn" action pauses 30 frames halfway; held 150 frames there, the pause is
+    shown as the turn for up to twice its demonstrated length, then as no action, and the
+    turn comes back within 15 frames of the performer moving on at frame 229 (10 by the
+    band alone, 4 more for leaving the wider band)."""
+    turn = actions["turn"]
+    performance = noisy(np.vstack([turn[:60], np.repeat(turn[60:61], 150, axis=0),
+                                   turn[61:]]), rng)
+    bank = FollowerBank(actions, config=BankConfig(still_frames=10))
+    shown = bank.follow(performance)["action"]
+    assert np.all(shown[60:100] == 1), shown[60:100]
+    assert np.all(shown[160:210] == -1), shown[160:210]
+    assert np.all(shown[244:] == 1), shown[229:]

@@ -52,6 +52,7 @@ class Body(NamedTuple):
     mass: np.ndarray                # (N,)
     inverse_mass: np.ndarray        # (N,) 0 for kinematic nodes
     gravity: np.ndarray             # (3,)
+    weighed: bool                   # gravity is not zero (else node forces add nothing)
     force: np.ndarray               # (N, 3) scratch
     sphere_nodes: np.ndarray        # (D,) int64
     sphere_radius: np.ndarray       # (D,)
@@ -78,6 +79,7 @@ class FrameArrays(NamedTuple):
                     puppet._dynamic_section, puppet._centers)
         body = Body(plan.si, plan.sj, plan.rest_length, plan.stiffness, plan.damping,
                     plan.damped, plan.scratch, model.mass, model.inverse_mass, model.gravity,
+                    bool(model.gravity.any()),
                     np.zeros_like(model.rest_positions), constraint.nodes, constraint.radius,
                     np.zeros(0, dtype=np.int64), np.zeros((0, 3)), np.zeros(0))
         return cls(pose, body)
@@ -98,7 +100,8 @@ def _pose_at(pose, fraction, inverse_h, x, v):
 
 @njit(cache=True, nogil=True)
 def _forces(body, x, v):
-    """body.force := spring forces + gravity (velocity damping is Verlet's retention)."""
+    """body.force := spring forces + gravity (velocity damping is Verlet's retention; no
+    targets or external forces here)."""
     body.force[...] = 0.0
     if body.damped:
         spring_forces_3d(x, v, body.si, body.sj, body.rest_length, body.stiffness,
@@ -106,8 +109,9 @@ def _forces(body, x, v):
     else:
         spring_forces_elastic_3d(x, body.si, body.sj, body.rest_length, body.stiffness,
                                  body.scratch, body.force)
-    node_forces(x, v, body.mass, body.gravity, 0.0, body.no_index, body.no_rows, body.no_gains,
-                body.no_gains, body.no_index, body.no_rows, body.force)
+    if body.weighed:
+        node_forces(x, v, body.mass, body.gravity, 0.0, body.no_index, body.no_rows,
+                    body.no_gains, body.no_gains, body.no_index, body.no_rows, body.force)
 
 
 @njit(cache=True, nogil=True)

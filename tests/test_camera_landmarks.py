@@ -71,6 +71,12 @@ def test_face_channels_read_only_the_points_a_tracker_unpacks(rng):
                                   lm.face_channels(face, W, H))
 
 
+def test_face_values_need_only_the_points_a_tracker_unpacks():
+    face = synthetic_face(yaw=-15, pitch=8, roll=20, lip_gap=0.2, lift=0.03)
+    points = {k: tuple(face[k]) for k in lm.FACE_POINTS}
+    np.testing.assert_array_equal(lm.face_values(points, W, H), lm.face_channels(face, W, H))
+
+
 def test_turning_the_picture_adds_to_the_roll_only():
     turned = lm.face_channels(synthetic_face(yaw=20, pitch=-10, roll=25), W, H)
     still = lm.face_channels(synthetic_face(yaw=20, pitch=-10, roll=0), W, H)

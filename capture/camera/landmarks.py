@@ -1,9 +1,9 @@
 """Landmarks -> performer channels: the geometry behind the markerless trackers.
 
-Pure numpy: each function takes the landmarks a MediaPipe model returns (as arrays) and writes
-named channel values into an output vector, NaN for what cannot be measured. The trackers in
-`capture.camera.markerless` call these once per frame; tests call them on landmarks built with
-known angles.
+Each function takes the landmarks a MediaPipe model returns (as arrays; the face also as a
+mapping of the points it reads, `face_values`) and writes named channel values into an output
+vector, NaN for what cannot be measured. The trackers in `capture.camera.markerless` call
+these once per frame; tests call them on landmarks built with known angles.
 
 Conventions (the same for every camera tracker):
 - positions are fractions of the image: x from the left edge (0) to the right edge (1), y from
@@ -96,29 +96,48 @@ def _ramp(value: float, low: float, high: float) -> float:
     return min(max((value - low) / (high - low), 0.0), 1.0)
 
 
-_FLIP = np.array([1.0, -1.0, -1.0])      # image axes (y down, z away) -> viewer axes
-# the distances a face's channels need, as point pairs: measured in one call per frame
-_PAIRS = np.array([(_EYE_L[0], _EYE_R[0]), _LIP_INNER, _MOUTH_CORNERS, *_LIDS_L, *_LIDS_R,
-                   _EYE_L, _EYE_R, _CHEEKS])
-_SPAN, _LIPS, _MOUTH, _LIDS_LEFT, _LIDS_RIGHT, _WIDTH_LEFT, _WIDTH_RIGHT, _CHEEK = (
-    0, 1, 2, slice(3, 6), slice(6, 9), 9, 10, 11)
+# The face's geometry is plain Python on the few points it reads: right after MediaPipe has
+# run, numpy's many small calls cost about 0.5 ms a frame (its code out of the caches), these
+# about 0.05 ms.
+
+def _mid(*points) -> tuple[float, float, float]:
+    n = len(points)
+    return (sum(p[0] for p in points) / n, sum(p[1] for p in points) / n,
+            sum(p[2] for p in points) / n)
 
 
-def face_frame(points: np.ndarray) -> np.ndarray:
-    """(3, 3) float: the face's axes as rows, in a viewer frame (x right, y up, z towards the
-    camera): across the eyes (to the performer's left), up the face, out of the face.
-
-    points : (N >= 468, 3) float [px] face mesh landmarks, image axes (y down, z away)."""
-    right_eye = (points[_EYE_R[0]] + points[_EYE_R[1]]) * (0.5 * _FLIP)
-    left_eye = (points[_EYE_L[0]] + points[_EYE_L[1]]) * (0.5 * _FLIP)
-    across = _unit(left_eye - right_eye)
-    up = (points[_FOREHEAD] - points[_NOSE_BASE]) * _FLIP
-    up = _unit(up - across * float(up @ across))
-    out = np.cross(across, up)
-    return np.stack([across, up, out])
+def _viewer(a, b) -> tuple[float, float, float]:
+    """b -> a in viewer axes (image y and z flipped)."""
+    return (a[0] - b[0], b[1] - a[1], b[2] - a[2])
 
 
-def head_angles(frame: np.ndarray) -> tuple[float, float, float]:
+def _unit3(v) -> tuple[float, float, float]:
+    norm = math.hypot(*v)
+    return (v[0] / norm, v[1] / norm, v[2] / norm) if norm > 0 else (math.nan,) * 3
+
+
+def _dot(a, b) -> float:
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+
+def face_frame(points) -> tuple[tuple[float, float, float], ...]:
+    """The face's axes (across, up, out) as rows, in a viewer frame (x right, y up, z towards
+    the camera): across the eyes (to the performer's left), up the face, out of the face.
+
+    points : face mesh landmarks [px] by index (an (N >= 468, 3) array or a mapping of the
+    FACE_POINTS to (x, y, z)), image axes (y down, z away)."""
+    p = points
+    across = _unit3(_viewer(_mid(p[_EYE_L[0]], p[_EYE_L[1]]), _mid(p[_EYE_R[0]], p[_EYE_R[1]])))
+    up = _viewer(p[_FOREHEAD], p[_NOSE_BASE])
+    along = _dot(up, across)
+    up = _unit3((up[0] - across[0] * along, up[1] - across[1] * along,
+                 up[2] - across[2] * along))
+    out = (across[1] * up[2] - across[2] * up[1], across[2] * up[0] - across[0] * up[2],
+           across[0] * up[1] - across[1] * up[0])
+    return across, up, out
+
+
+def head_angles(frame) -> tuple[float, float, float]:
     """(yaw, pitch, roll) [deg] of a face frame (rows: across, up, out; viewer axes).
 
     The face's rotation is taken as yaw (about the vertical), then pitch (about the horizontal),
@@ -141,38 +160,49 @@ def face_channels(points: np.ndarray, width: int, height: int,
         landmarks times (width, height, width)); only the rows FACE_POINTS are read; width,
         height : the image size [px].
     Returns out (13,) float."""
-    if out is None:
-        out = np.empty(len(FACE_CHANNELS))
     points = np.asarray(points, dtype=np.float64)
     if points.ndim != 2 or points.shape[0] < 468 or points.shape[1] < 3:
         raise ValueError(f"face_channels needs (468 or 478, 3) landmarks, got {points.shape}")
-    distance = np.linalg.norm(points[_PAIRS[:, 0], :3] - points[_PAIRS[:, 1], :3], axis=1)
-    span = distance[_SPAN]
+    rows = points[list(FACE_POINTS), :3].tolist()
+    return face_values(dict(zip(FACE_POINTS, rows)), width, height, out)
+
+
+def face_values(points, width: int, height: int,
+                out: np.ndarray | None = None) -> np.ndarray:
+    """`face_channels` on a mapping {index: (x, y, z)} of (at least) the FACE_POINTS, as a
+    tracker unpacks them."""
+    if out is None:
+        out = np.empty(len(FACE_CHANNELS))
+    p = points
+    dist = math.dist
+    span = dist(p[_EYE_L[0]], p[_EYE_R[0]])
     if not span > 0:
         out[:] = np.nan
         return out
-    frame = face_frame(points)
+    frame = face_frame(p)
+    up = frame[1]
     # heights along the face's up axis [eye spans]: the mouth corners above the lips' centre,
     # each brow above its upper lid
-    offsets = np.stack([
-        points[list(_MOUTH_CORNERS)].mean(axis=0) - points[list(_LIP_INNER)].mean(axis=0),
-        points[list(_BROW_L)].mean(axis=0) - points[_UPPER_LID_L],
-        points[list(_BROW_R)].mean(axis=0) - points[_UPPER_LID_R]])
-    lift, brow_left, brow_right = (offsets * _FLIP) @ frame[1] / span
-    out[0] = min(distance[_LIPS] / span / JAW_OPEN_FULL, 1.0)
-    out[1] = _ramp(distance[_MOUTH] / span, *MOUTH_WIDE_RANGE)
+    lift = _dot(_viewer(_mid(*(p[k] for k in _MOUTH_CORNERS)),
+                        _mid(*(p[k] for k in _LIP_INNER))), up) / span
+    brow_left = _dot(_viewer(_mid(*(p[k] for k in _BROW_L)), p[_UPPER_LID_L]), up) / span
+    brow_right = _dot(_viewer(_mid(*(p[k] for k in _BROW_R)), p[_UPPER_LID_R]), up) / span
+    out[0] = min(dist(*(p[k] for k in _LIP_INNER)) / span / JAW_OPEN_FULL, 1.0)
+    out[1] = _ramp(dist(*(p[k] for k in _MOUTH_CORNERS)) / span, *MOUTH_WIDE_RANGE)
     out[2] = _ramp(lift, *SMILE_RANGE)
     out[3] = _ramp(brow_left, *BROW_RANGE)
     out[4] = _ramp(brow_right, *BROW_RANGE)
-    opening_left = distance[_LIDS_LEFT].mean() / distance[_WIDTH_LEFT]
-    opening_right = distance[_LIDS_RIGHT].mean() / distance[_WIDTH_RIGHT]
+    opening_left = (sum(dist(p[a], p[b]) for a, b in _LIDS_L) / 3
+                    / dist(p[_EYE_L[0]], p[_EYE_L[1]]))
+    opening_right = (sum(dist(p[a], p[b]) for a, b in _LIDS_R) / 3
+                     / dist(p[_EYE_R[0]], p[_EYE_R[1]]))
     out[5] = 1.0 - _ramp(opening_left, *EYE_OPEN_RANGE)
     out[6] = 1.0 - _ramp(opening_right, *EYE_OPEN_RANGE)
     out[7:10] = head_angles(frame)
-    between = (points[_EYE_R[0]] + points[_EYE_R[1]] + points[_EYE_L[0]] + points[_EYE_L[1]]) / 4
+    between = _mid(p[_EYE_R[0]], p[_EYE_R[1]], p[_EYE_L[0]], p[_EYE_L[1]])
     out[10] = between[0] / width
     out[11] = between[1] / height
-    out[12] = distance[_CHEEK] / width
+    out[12] = dist(*(p[k] for k in _CHEEKS)) / width
     return out
 
 

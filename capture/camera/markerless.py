@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from .landmarks import (FACE_CHANNELS, FACE_POINTS, HAND_CHANNELS, POSE_CHANNELS,
-                        face_channels, hand_channels, pose_channels)
+                        face_values, hand_channels, pose_channels)
 from .base import Tracker, _cv2, _image
 
 log = logging.getLogger(__name__)
@@ -210,6 +210,27 @@ class MediapipeTracker(Tracker):
             self._solution.reset()
             self._warm_up()
 
+    def _run(self, rgb: np.ndarray, *streams: str) -> list:
+        """The frame through the solution's graph, as `process` does it (one image packet
+        at the next 30 fps timestamp, then waiting until the graph is idle), without the rest
+        of `process`: it defines a namedtuple class on every call (about 0.1 ms) and converts
+        every output. Returns the contents of `streams` (a proto, a list of protos; None
+        where the graph gave nothing)."""
+        solution = self._solution
+        solution._graph_outputs.clear()
+        solution._simulated_timestamp += 33333
+        solution._graph.add_packet_to_input_stream(
+            stream=self._input, packet=solution._make_packet(self._input_type, rgb).at(
+                solution._simulated_timestamp))
+        solution._graph.wait_until_idle()
+        outputs, types = solution._graph_outputs, solution._output_stream_type_info
+        return [solution._get_packet_content(types[name], outputs[name])
+                if name in outputs else None for name in streams]
+
+    def _graph_ready(self) -> None:
+        """Read the solution's input stream once it is built (for `_run`)."""
+        (self._input, self._input_type), = self._solution._input_stream_type_info.items()
+
     def _rgb_of(self, image: np.ndarray) -> np.ndarray:
         cv2 = _cv2()
         image = _image(image)
@@ -263,6 +284,7 @@ class FaceMeshTracker(MediapipeTracker):
         _, solutions = _mediapipe()
         with native_notices():
             self._solution = self._mesh(solutions)
+            self._graph_ready()
             self._warm_up()
             self._far_mesh = self._detector = None
             if self.far:
@@ -273,7 +295,7 @@ class FaceMeshTracker(MediapipeTracker):
                 self._detector.process(np.zeros((64, 64, 3), np.uint8))
         self._window: tuple[float, float, float] | None = None    # centre x, y, side [px]
         self._window_rgb = np.empty((self.WINDOW_PX, self.WINDOW_PX, 3), np.uint8)
-        self._points: np.ndarray | None = None
+        self._points: dict[int, tuple[float, float, float]] = {}   # FACE_POINTS [px]
         self._landmarks = None
         self._frame = (0.0, 0.0, 0.0, 0.0)   # landmark -> px: x0, y0, x scale, y scale
         self.found_far = False               # the last face was found in a far window
@@ -339,7 +361,7 @@ class FaceMeshTracker(MediapipeTracker):
         out = np.full(len(self.channels), np.nan)
         landmarks = None
         if self._window is None:
-            faces = self._solution.process(rgb).multi_face_landmarks
+            faces, = self._run(rgb, "multi_face_landmarks")
             if faces:
                 landmarks = faces[0].landmark
                 self._frame = (0.0, 0.0, float(width), float(height))
@@ -360,14 +382,12 @@ class FaceMeshTracker(MediapipeTracker):
         if not self.seen:
             return out
         self._landmarks = landmarks
-        if self._points is None or self._points.shape[0] != len(landmarks):
-            self._points = np.zeros((len(landmarks), 3))
-        points = self._points
         x0, y0, sx, sy = self._frame
+        points = self._points
         for k in FACE_POINTS:        # the points the channels read, not all 478
             point = landmarks[k]
             points[k] = (x0 + point.x * sx, y0 + point.y * sy, point.z * sx)
-        return face_channels(points, width, height, out=out)
+        return face_values(points, width, height, out=out)
 
     def reset(self) -> None:
         super().reset()
@@ -424,6 +444,7 @@ class HandsTracker(MediapipeTracker):
                 model_complexity=1 if model == "full" else 0,
                 min_detection_confidence=self.min_detection,
                 min_tracking_confidence=self.min_tracking)
+            self._graph_ready()
             self._warm_up()
         self._last_wrist = {side: None for side in self.SIDES}
         self._image_points = np.empty((21, 3))
@@ -443,11 +464,9 @@ class HandsTracker(MediapipeTracker):
 
     def process(self, image: np.ndarray) -> np.ndarray:
         rgb = self._rgb_of(image)
-        result = self._solution.process(rgb)
+        found, worlds, labels = (value or [] for value in self._run(
+            rgb, "multi_hand_landmarks", "multi_hand_world_landmarks", "multi_handedness"))
         out = np.full(len(self.channels), np.nan)
-        found = result.multi_hand_landmarks or []
-        worlds = result.multi_hand_world_landmarks or []
-        labels = result.multi_handedness or []
         hands = []
         for landmarks, handedness in zip(found, labels):
             category = handedness.classification[0]
@@ -496,6 +515,7 @@ class PoseTracker(MediapipeTracker):
                 static_image_mode=False, model_complexity=1, smooth_landmarks=False,
                 enable_segmentation=False, min_detection_confidence=self.min_detection,
                 min_tracking_confidence=self.min_tracking)
+            self._graph_ready()
             self._warm_up()
         self._image_points = np.empty((33, 3))
         self._visibility = np.empty(33)
@@ -511,15 +531,15 @@ class PoseTracker(MediapipeTracker):
     def process(self, image: np.ndarray) -> np.ndarray:
         rgb = self._rgb_of(image)
         height, width = rgb.shape[:2]
-        result = self._solution.process(rgb)
+        landmarks, world = self._run(rgb, "pose_landmarks", "pose_world_landmarks")
         out = np.full(len(self.channels), np.nan)
-        self.seen = result.pose_landmarks is not None and result.pose_world_landmarks is not None
+        self.seen = landmarks is not None and world is not None
         if not self.seen:
             return out
-        for k, point in enumerate(result.pose_landmarks.landmark):
+        for k, point in enumerate(landmarks.landmark):
             self._image_points[k] = (point.x, point.y, point.z)
             self._visibility[k] = point.visibility
-        for k, point in enumerate(result.pose_world_landmarks.landmark):
+        for k, point in enumerate(world.landmark):
             self._world_points[k] = (point.x, point.y, point.z)
         return pose_channels(self._image_points, self._visibility, self._world_points,
                              aspect=height / width, out=out)

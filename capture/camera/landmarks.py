@@ -87,11 +87,6 @@ BROW_RANGE = (0.10, 0.25)
 EYE_OPEN_RANGE = (0.08, 0.25)     # eye opening ratio of a closed .. an open eye
 
 
-def _unit(vector: np.ndarray) -> np.ndarray:
-    norm = float(np.linalg.norm(vector))
-    return vector / norm if norm > 0 else vector * np.nan
-
-
 def _ramp(value: float, low: float, high: float) -> float:
     return min(max((value - low) / (high - low), 0.0), 1.0)
 
@@ -219,38 +214,56 @@ FULL_BEND = {"thumb": 140.0, "index": 250.0, "middle": 250.0, "ring": 250.0, "pi
 PINCH_RANGE = (0.2, 0.8)     # thumb-index tip distance in palm lengths: touching .. apart
 
 
-def flexion(chain: np.ndarray) -> float:
+def _sub(a, b) -> tuple[float, float, float]:
+    return (a[0] - b[0], a[1] - b[1], a[2] - b[2])
+
+
+def _cross(a, b) -> tuple[float, float, float]:
+    return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
+
+
+def _square_to(v, axis) -> tuple[float, float, float]:
+    """v less its part along the unit vector axis, made a unit vector."""
+    along = _dot(v, axis)
+    return _unit3((v[0] - axis[0] * along, v[1] - axis[1] * along, v[2] - axis[2] * along))
+
+
+def _angle3(a, b) -> float:
+    """[deg] between two vectors; NaN if either is zero."""
+    na, nb = math.hypot(*a), math.hypot(*b)
+    if not (na > 0 and nb > 0):
+        return math.nan
+    return math.degrees(math.acos(min(max(_dot(a, b) / (na * nb), -1.0), 1.0)))
+
+
+def flexion(chain) -> float:
     """[deg] the summed bend of a chain of points (K, 3): the angles between consecutive
     segments (0 for a straight chain)."""
-    segments = np.diff(chain, axis=0)
+    chain = chain.tolist() if isinstance(chain, np.ndarray) else chain
     total = 0.0
-    for a, b in zip(segments[:-1], segments[1:]):
-        na, nb = np.linalg.norm(a), np.linalg.norm(b)
-        if not (na > 0 and nb > 0):
-            return math.nan
-        total += math.degrees(math.acos(min(max(float(a @ b) / (na * nb), -1.0), 1.0)))
+    for a, b, c in zip(chain, chain[1:], chain[2:]):
+        total += _angle3(_sub(b, a), _sub(c, b))
     return total
 
 
-def hand_roll(world: np.ndarray, *, is_left: bool) -> float:
+def hand_roll(world, *, is_left: bool) -> float:
     """[rad] the hand turned about its long axis (wrist -> middle knuckle): 0 with the palm to
     the camera, positive when the thumb side turns towards the camera.
 
     world : (21, 3) float [m], camera axes (x right, y down, z away from the camera)."""
-    long_axis = _unit(world[9] - world[_WRIST])
-    across = world[5] - world[17]              # pinky knuckle -> index knuckle: thumb side
-    across = _unit(across - long_axis * float(across @ long_axis))
-    toward_camera = np.array([0.0, 0.0, -1.0])
-    facing = _unit(toward_camera - long_axis * float(toward_camera @ long_axis))
+    world = world.tolist() if isinstance(world, np.ndarray) else world
+    long_axis = _unit3(_sub(world[9], world[_WRIST]))
+    # pinky knuckle -> index knuckle: the thumb side
+    across = _square_to(_sub(world[5], world[17]), long_axis)
+    facing = _square_to((0.0, 0.0, -1.0), long_axis)      # towards the camera
     # with the palm to the camera, `across` is perpendicular to the view; it turns towards
     # the camera (facing) as the thumb side comes forward
-    normal = np.cross(long_axis, facing)
-    side = float(across @ normal)
+    side = _dot(across, _cross(long_axis, facing))
     # palm to the camera, the right hand's thumb points to the image's right, the left's to
     # its left: one sign for both hands
     if is_left:
         side = -side
-    return math.atan2(float(across @ facing), side)
+    return math.atan2(_dot(across, facing), side)
 
 
 def hand_channels(image: np.ndarray, world: np.ndarray, *, is_left: bool,
@@ -266,14 +279,15 @@ def hand_channels(image: np.ndarray, world: np.ndarray, *, is_left: bool,
     if world.shape != (21, 3) or image.ndim != 2 or image.shape[0] != 21:
         raise ValueError(f"hand_channels needs (21, 3) landmarks, got {image.shape} and "
                          f"{world.shape}")
+    points = world.tolist()       # plain Python from here: see the face's geometry
     for slot, finger in enumerate(FINGERS):
-        chain = world[list(_CHAINS[finger])]
-        out[slot] = min(max(flexion(chain) / FULL_BEND[finger], 0.0), 1.0)
-    palm = float(np.linalg.norm(world[9] - world[_WRIST]))
-    tips = float(np.linalg.norm(world[4] - world[8]))
+        bend = flexion([points[k] for k in _CHAINS[finger]])
+        out[slot] = min(max(bend / FULL_BEND[finger], 0.0), 1.0)
+    palm = math.dist(points[9], points[_WRIST])
+    tips = math.dist(points[4], points[8])
     out[5] = 1.0 - _ramp(tips / palm, *PINCH_RANGE) if palm > 0 else math.nan
     out[6], out[7] = image[_WRIST, 0], image[_WRIST, 1]
-    out[8] = hand_roll(world, is_left=is_left)
+    out[8] = hand_roll(points, is_left=is_left)
     return out
 
 
@@ -292,13 +306,6 @@ _HIP = {"left": 23, "right": 24}
 VISIBLE = 0.5
 
 
-def _angle(a: np.ndarray, b: np.ndarray) -> float:
-    na, nb = np.linalg.norm(a), np.linalg.norm(b)
-    if not (na > 0 and nb > 0):
-        return math.nan
-    return math.degrees(math.acos(min(max(float(a @ b) / (na * nb), -1.0), 1.0)))
-
-
 def pose_channels(image: np.ndarray, visibility: np.ndarray, world: np.ndarray, *,
                   aspect: float = 0.75, out: np.ndarray | None = None) -> np.ndarray:
     """The pose channels (POSE_CHANNELS).
@@ -310,36 +317,40 @@ def pose_channels(image: np.ndarray, visibility: np.ndarray, world: np.ndarray, 
         out = np.empty(len(POSE_CHANNELS))
     image = np.asarray(image, dtype=np.float64)
     world = np.asarray(world, dtype=np.float64)
-    seen = np.asarray(visibility, dtype=np.float64) >= VISIBLE
-    if image.shape[0] != 33 or world.shape != (33, 3) or seen.shape != (33,):
+    visibility = np.asarray(visibility, dtype=np.float64)
+    if image.shape[0] != 33 or world.shape != (33, 3) or visibility.shape != (33,):
         raise ValueError(f"pose_channels needs 33 landmarks, got {image.shape}, {world.shape}, "
-                         f"{seen.shape}")
-    # the model also places points beyond the picture's edges: those are not seen either
-    seen &= np.all((image[:, :2] >= 0.0) & (image[:, :2] <= 1.0), axis=1)
+                         f"{visibility.shape}")
+    # plain Python from here (see the face's geometry); the model also places points beyond
+    # the picture's edges: those are not seen either
+    image, world = image[:, :2].tolist(), world.tolist()
+    seen = [v >= VISIBLE and 0.0 <= x <= 1.0 and 0.0 <= y <= 1.0
+            for v, (x, y) in zip(visibility.tolist(), image)]
     out[:] = np.nan
     left, right = _SHOULDER["left"], _SHOULDER["right"]
-    shoulders = (world[left] + world[right]) / 2
-    if seen[[_HIP["left"], _HIP["right"]]].all():
-        down = (world[_HIP["left"]] + world[_HIP["right"]]) / 2 - shoulders
+    shoulders = _mid(world[left], world[right])
+    if seen[_HIP["left"]] and seen[_HIP["right"]]:
+        down = _sub(_mid(world[_HIP["left"]], world[_HIP["right"]]), shoulders)
     else:
         # hips out of the picture: the image's down, square to the shoulder line
-        line = _unit(world[left] - world[right])
-        down = np.array([0.0, 1.0, 0.0]) - line * line[1]
+        line = _unit3(_sub(world[left], world[right]))
+        down = (-line[0] * line[1], 1.0 - line[1] * line[1], -line[2] * line[1])
     for slot, side in enumerate(("left", "right")):
         shoulder, elbow, wrist = _SHOULDER[side], _ELBOW[side], _WRIST_POSE[side]
+        upper_arm = _sub(world[elbow], world[shoulder])
+        forearm = _sub(world[wrist], world[elbow])
         if seen[shoulder] and seen[elbow]:
-            out[slot] = _angle(world[elbow] - world[shoulder], down)
+            out[slot] = _angle3(upper_arm, down)
         if seen[shoulder] and seen[elbow] and seen[wrist]:
-            out[2 + slot] = _angle(world[elbow] - world[shoulder], world[wrist] - world[elbow])
-        hand = (world[_PINKY[side]] + world[_INDEX[side]]) / 2
+            out[2 + slot] = _angle3(upper_arm, forearm)
         if seen[elbow] and seen[wrist] and seen[_PINKY[side]] and seen[_INDEX[side]]:
-            out[4 + slot] = _angle(world[wrist] - world[elbow], hand - world[wrist])
+            hand = _mid(world[_PINKY[side]], world[_INDEX[side]])
+            out[4 + slot] = _angle3(forearm, _sub(hand, world[wrist]))
         if seen[wrist]:
-            out[7 + 2 * slot] = image[wrist, 0]
-            out[8 + 2 * slot] = image[wrist, 1]
+            out[7 + 2 * slot], out[8 + 2 * slot] = image[wrist]
     if seen[left] and seen[right]:
         # the performer's right shoulder is on the image's left; y points down, so a line
         # turned counter-clockwise rises to the right
-        dx, dy = image[left, 0] - image[right, 0], image[left, 1] - image[right, 1]
+        dx, dy = image[left][0] - image[right][0], image[left][1] - image[right][1]
         out[6] = math.degrees(math.atan2(-dy * aspect, dx))
     return out

@@ -316,7 +316,8 @@ class FollowerBank:
         if c.residual_cap > 1.0:
             self._widen_args = (*self._intervals, self._shown, self._frame, self._shown_progress,
                                 self._shown_variance, c.residual_memory, c.residual_cap,
-                                min(c.outlier_sigmas, 1e300), self._interval_state)
+                                min(c.outlier_sigmas, 1e300), float(c.resolution),
+                                self._interval_state)
             widen_shown = compiled_entry(widen, *self._widen_args)
         self._kernels = (step, widen_shown)
         return self._kernels
@@ -326,7 +327,8 @@ class FollowerBank:
         c = self.config.follower
         if c.residual_cap > 1.0:
             widen(*self._intervals, shown, X, progress, variance, c.residual_memory,
-                  c.residual_cap, min(c.outlier_sigmas, 1e300), self._interval_state)
+                  c.residual_cap, min(c.outlier_sigmas, 1e300), float(c.resolution),
+                  self._interval_state)
 
     def _publish(self, judged: bool = False, quiet: bool = False) -> None:
         """The output from the bank's state; ``judged``: the still stage judges this frame

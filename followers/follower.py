@@ -253,7 +253,8 @@ class Follower:
         c = self.config
         if c.residual_cap > 1.0:
             widen(*self._intervals, which, X, progress, variance, c.residual_memory,
-                  c.residual_cap, min(c.outlier_sigmas, 1e300), self._interval_state)
+                  c.residual_cap, min(c.outlier_sigmas, 1e300), float(c.resolution),
+                  self._interval_state)
 
     def __repr__(self) -> str:
         return (f"Follower(T={self.length}, D={self.channels}, window={self._window}, "

@@ -17,8 +17,12 @@ AR(1) samples against independent ones) and by the residual's mean square where 
 (a performer further from the template than its sigma says), at most ``residual_cap``. The
 mean square is the window's average over the frames seen so far (the exponential average
 divided by its weights' sum), so the first frames of a performance count in full rather than
-as if preceded by a perfect fit. Independent residuals within the sigma (the demonstration
-replayed) leave the interval as it was.
+as if preceded by a perfect fit. What the factor adds, ``factor - 1`` times the variance, is
+taken of the variance plus that of a uniform position within one state (1/12 of a state's
+width squared, ``FollowerConfig.resolution`` states per template frame): a posterior on one
+state has almost no variance, while a performer who differs is off by a part of a state that
+no factor of it reaches. Independent residuals within the sigma (the demonstration replayed)
+leave the interval as it was.
 """
 from __future__ import annotations
 
@@ -49,16 +53,17 @@ def reset_interval(state: np.ndarray) -> None:
 
 
 @nb.njit(cache=True)
-def widen(templates, sigmas, offsets, which, X, progress, variance, memory, cap, clip, state):
-    """Multiply ``variance (N,)`` in place by each frame's correlation and fit factor.
+def widen(templates, sigmas, offsets, which, X, progress, variance, memory, cap, clip,
+          resolution, state):
+    """Widen ``variance (N,)`` in place by each frame's correlation and fit factor.
 
     templates, sigmas : (sum T_k, D) the followers' templates and sigmas stacked;
     offsets, lengths implied: template ``k`` is rows ``offsets[k]:offsets[k + 1]``;
     which : (N,) int: the template each frame's ``progress`` is on (< 0: none, the frame is
     left alone); X : (N, D) input (NaN, inf: missing); memory [frames]; cap [x variance];
     clip [sigmas]: a residual counts at most this far (an absurd value, an outlier, would
-    hold the estimate for many frames); state : see ``interval_state``, carried across
-    calls."""
+    hold the estimate for many frames); resolution : states per template frame; state : see
+    ``interval_state``, carried across calls."""
     decay = math.exp(-1.0 / memory)
     D = X.shape[1]
     for n in range(X.shape[0]):
@@ -92,7 +97,9 @@ def widen(templates, sigmas, offsets, which, X, progress, variance, memory, cap,
             state[2] = decay * state[2] + (1.0 - decay)
         rho = min(max(state[0] / state[1], 0.0), RHO_MAX)
         square = state[1] / state[2] if state[2] > 0.0 else 0.0
-        variance[n] *= min(cap, (1.0 + rho) / (1.0 - rho) * max(1.0, square))
+        factor = min(cap, (1.0 + rho) / (1.0 - rho) * max(1.0, square))
+        width = 1.0 / (resolution * (T - 1))    # a state [progress]
+        variance[n] += (factor - 1.0) * (variance[n] + width * width / 12.0)
 
 
 def stacked(templates, sigmas):

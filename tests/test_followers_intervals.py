@@ -8,7 +8,7 @@ from followers import BankConfig, Follower, FollowerBank, FollowerConfig, time_w
 from followers.intervals import interval_state, stacked, widen
 
 
-def slow_widen(template, sigma, X, progress, variance, memory, cap, clip):
+def slow_widen(template, sigma, X, progress, variance, memory, cap, clip, resolution):
     """The rule of ``followers.intervals`` written out plainly, one template."""
     out = variance.copy()
     decay = math.exp(-1.0 / memory)
@@ -30,7 +30,9 @@ def slow_widen(template, sigma, X, progress, variance, memory, cap, clip):
             weights = decay * weights + (1 - decay)
         previous = r
         rho = min(max(lag1 / lag0, 0.0), 0.95)
-        out[n] *= min(cap, (1 + rho) / (1 - rho) * max(1.0, lag0 / weights))
+        factor = min(cap, (1 + rho) / (1 - rho) * max(1.0, lag0 / weights))
+        state = 1 / (resolution * (T - 1))  # a state's width [progress]
+        out[n] = out[n] * factor + (factor - 1) * state ** 2 / 12
     return out
 
 
@@ -43,10 +45,10 @@ def test_widen_is_the_plain_rule(rng):
     X[40, 0] = 1e9
     progress = np.clip(np.linspace(0, 1, 70) + rng.normal(scale=0.02, size=70), 0, 1)
     variance = rng.uniform(1e-4, 1e-3, size=70)
-    expected = slow_widen(template, sigma, X, progress, variance, 20.0, 20.0, 5.0)
+    expected = slow_widen(template, sigma, X, progress, variance, 20.0, 20.0, 5.0, 4.0)
     got = variance.copy()
     widen(*stacked([template], [sigma]), np.zeros(70, dtype=np.int64), X, progress, got, 20.0,
-          20.0, 5.0, interval_state(3))
+          20.0, 5.0, 4.0, interval_state(3))
     np.testing.assert_allclose(got, expected, rtol=1e-12)
     assert (got > 2 * variance).mean() > 0.5  # a random-walk residual is correlated
 
@@ -59,7 +61,7 @@ def test_independent_residuals_beyond_the_sigma_widen_by_their_mean_square(rng):
     X = template + rng.normal(scale=0.3, size=(200, 2))      # 3 sigmas: 9x the variance
     variance = np.full(200, 1e-4)
     widen(*stacked([template], [sigma]), np.zeros(200, dtype=np.int64), X,
-          np.linspace(0, 1, 200), variance, 20.0, 20.0, 5.0, interval_state(2))
+          np.linspace(0, 1, 200), variance, 20.0, 20.0, 5.0, 4.0, interval_state(2))
     assert 5e-4 < np.median(variance[40:]) < 1.3e-3
     assert 4e-4 < np.median(variance[2:10]) < 1.5e-3
 
@@ -70,9 +72,25 @@ def test_independent_residuals_leave_the_interval_alone(rng):
     X = template + rng.normal(scale=0.1, size=(200, 2))
     variance = np.full(200, 1e-4)
     widen(*stacked([template], [sigma]), np.zeros(200, dtype=np.int64), X,
-          np.linspace(0, 1, 200), variance, 20.0, 20.0, 5.0, interval_state(2))
+          np.linspace(0, 1, 200), variance, 20.0, 20.0, 5.0, 4.0, interval_state(2))
     assert np.median(variance[40:]) < 1.3e-4
 
+
+
+def test_a_posterior_on_one_state_widens_by_a_states_width():
+    """A posterior on one state (variance 0): input on the template leaves it at 0; a constant
+    offset (a residual correlated throughout) adds the factor's excess times a uniform's within
+    one state (1/12 of its width squared, 4 states per frame)."""
+    template = np.sin(np.linspace(0, 6, 51))[:, None]
+    sigma = np.full((51, 1), 0.1)
+    for offset in (0.0, 0.05):
+        variance = np.zeros(51)
+        widen(*stacked([template], [sigma]), np.zeros(51, dtype=np.int64), template + offset,
+              np.linspace(0, 1, 51), variance, 20.0, 20.0, 5.0, 4.0, interval_state(1))
+        if offset == 0.0:
+            assert not variance.any()
+        else:   # rho soon at its cap 0.95: a factor of 39, capped at 20
+            np.testing.assert_allclose(variance[10:], 19 * (1 / 200) ** 2 / 12)
 
 def smooth(rng, T=150, D=3):
     """A smooth random gesture (T, D)."""

@@ -18,6 +18,7 @@ import math
 
 import numpy as np
 
+from followers._exp import exp_nonpositive
 from followers._jit import inline, kernel
 from followers._kernels import forward_step, main_progress
 
@@ -80,7 +81,8 @@ def outline_step(fmodel, fstate, bmodel, bstate, n_obs):
                 top = b
         total = 0.0
         for s in range(S):
-            v = alpha[k, s] * math.exp(scratch[s] - top) if alpha[k, s] > 0.0 else 0.0
+            v = alpha[k, s] * exp_nonpositive(scratch[s] - top if alpha[k, s] > 0.0 else
+                                              -np.inf)
             alpha[k, s] = v
             total += v
         for s in range(S):

@@ -28,6 +28,7 @@ import math
 import numpy as np
 
 from followers._cells import subframe_moments, subframe_rows
+from followers._exp import exp_nonpositive
 from followers._jit import inline, kernel, plain
 
 
@@ -437,16 +438,43 @@ def _tops(state, k, off, dual, mixed):
 @inline
 def _lift_rows(state, k, off, shift):
     """``state.lift[r]``: row r's emission (model 0) over ``exp(shift)`` where it holds mass,
-    else 0; returns the mass it leaves, sum_j predicted_j * lift_j."""
+    else 0 (``shift`` at least the largest such emission); returns the mass it leaves,
+    sum_j predicted_j * lift_j."""
     rowsum, logb, support, lift = state.rowsum, state.logb, state.support, state.lift
     c = 0.0
     for t in range(2):
-        for j in range(support[k, t, 0], support[k, t, 1] + 1):
-            r = off + j
+        for r in range(off + support[k, t, 0], off + support[k, t, 1] + 1):
+            v = rowsum[t, r]
+            e = exp_nonpositive(logb[0, r] - shift if v > 0.0 else -np.inf)
+            lift[r] = e
+            c += v * e
+    return c
+
+
+@inline
+def _lift_rows_far(state, k, off, shift):
+    """``_lift_rows`` for any ``shift`` (a row's emission may exceed it by up to 709)."""
+    rowsum, logb, support, lift = state.rowsum, state.logb, state.support, state.lift
+    c = 0.0
+    for t in range(2):
+        for r in range(off + support[k, t, 0], off + support[k, t, 1] + 1):
             v = rowsum[t, r]
             e = math.exp(logb[0, r] - shift) if v > 0.0 else 0.0
             lift[r] = e
             c += v * e
+    return c
+
+
+@inline
+def _predicted_mass(state, e, k, off, top):
+    """sum_j predicted_j * exp(logb[e, j] - top) over both tracks' rows that hold mass
+    (``top`` at least their largest emission)."""
+    rowsum, logb, support = state.rowsum, state.logb, state.support
+    c = 0.0
+    for t in range(2):
+        for r in range(off + support[k, t, 0], off + support[k, t, 1] + 1):
+            v = rowsum[t, r]
+            c += v * exp_nonpositive(logb[e, r] - top if v > 0.0 else -np.inf)
     return c
 
 
@@ -467,23 +495,10 @@ def _weigh(model, state, k):
     mixed = dual and mixture > 0.0
     top0, top1, top2 = _tops(state, k, off, dual, mixed)
     shift = top0 if top0 > -np.inf else 0.0
-    c = 0.0
-    c1 = 0.0
-    c2 = 0.0
-    for t in range(2):
-        for j in range(support[k, t, 0], support[k, t, 1] + 1):
-            r = off + j
-            v = rowsum[t, r]
-            e = 0.0
-            if v > 0.0:
-                e = math.exp(logb[0, r] - shift)
-                if dual:
-                    c1 += v * math.exp(logb[1, r] - top1)
-                    if mixed:
-                        c2 += v * math.exp(logb[2, r] - top2)
-            lift[r] = e
-            c += v * e
+    c = _lift_rows(state, k, off, shift)
     if dual:
+        c1 = _predicted_mass(state, 1, k, off, top1)
+        c2 = _predicted_mass(state, 2, k, off, top2) if mixed else 0.0
         score = math.log(c1) + top1 if c1 > 1e-280 else _predictive_loglik(state, 1, k, off)
         if mixed:
             exact = math.log(c2) + top2 if c2 > 1e-280 else \
@@ -498,7 +513,7 @@ def _weigh(model, state, k):
                 if v > 0.0:
                     best = max(best, math.log(v) + logb[0, off + j])
         shift = best
-        c = _lift_rows(state, k, off, shift)
+        c = _lift_rows_far(state, k, off, shift)
     if not (c > 0.0 and c < np.inf):
         _lost(state, k)
         return 0.0, shift
@@ -707,6 +722,14 @@ def main_progress(lengths, moments, main, k):
     t = main[k]
     # a division: exactly 1 at the end
     return moments[k, t, 1] / span, moments[k, t, 2] / (span * span)
+
+
+@kernel
+def follow_frame(model, state, x, progress, variance):
+    """``forward_step`` for a lone follower; its main-track progress and variance into
+    ``progress``, ``variance`` (1,)."""
+    forward_step(model, state, x)
+    progress[0], variance[0] = main_progress(model.lengths, state.moments, state.main, 0)
 
 
 @kernel

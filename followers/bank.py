@@ -280,7 +280,8 @@ class FollowerBank:
         reset_forward(self._forward, self._state)
         reset_bank(self._model, self._bank)
         self._state.mixture[0] = self._model.mixture_start
-        _bank_kernels.gate(self._state, self._model, self._bank, -1)
+        gate = self._kernels[2] if self._kernels else _bank_kernels.gate
+        gate(self._state, self._model, self._bank, -1)
         self._still_window.reset()
         self._still_state.reset()
         reset_interval(self._interval_state)
@@ -294,7 +295,7 @@ class FollowerBank:
         float64 array."""
         frame = self._frame
         frame[0] = check_frame(x, self.channels)
-        step, widen_shown = self._kernels or self._entries()
+        step, widen_shown, _ = self._kernels or self._entries()
         step(self._forward.model, self._state, self._model, self._bank, frame[0])
         self._still_window.push(frame[0])
         self._publish(judged=True)
@@ -308,7 +309,8 @@ class FollowerBank:
         return self._out
 
     def _entries(self):
-        """``step``'s kernels resolved once for its own arrays (``followers._jit.entry``)."""
+        """``step``'s and ``reset``'s kernels resolved once for its own arrays
+        (``followers._jit.entry``)."""
         step = compiled_entry(_bank_kernels.bank_step, self._forward.model, self._state,
                               self._model, self._bank, self._frame[0])
         widen_shown = None
@@ -319,7 +321,8 @@ class FollowerBank:
                                 min(c.outlier_sigmas, 1e300), float(c.resolution),
                                 self._interval_state)
             widen_shown = compiled_entry(widen, *self._widen_args)
-        self._kernels = (step, widen_shown)
+        gate = compiled_entry(_bank_kernels.gate, self._state, self._model, self._bank, -1)
+        self._kernels = (step, widen_shown, gate)
         return self._kernels
 
     def _widen(self, X, shown, progress, variance) -> None:

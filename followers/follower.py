@@ -7,6 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from followers import _kernels
+from followers._jit import entry as compiled_entry
 from followers.config import FollowerConfig
 from followers.defaults import as_sigma, as_template, as_window, default_sigma, default_window
 from followers.demos import combine, is_takes
@@ -157,6 +158,7 @@ class Follower:
         self._interval_state = interval_state(D)
         self._frame = np.zeros((1, D))
         self._on = np.zeros(1, dtype=np.int64)
+        self._calls = ()  # per-frame kernels (``_entries``)
 
     # ---- parameters ---------------------------------------------------------------------------
     @property
@@ -212,19 +214,31 @@ class Follower:
 
     def step(self, x) -> FollowerOutput:
         """Follow one frame ``x (D,) float`` (NaN = missing channel; all NaN = no observation)."""
-        model, state = self._forward.model, self._state
         self._frame[0] = check_frame(x, self.channels)
-        _kernels.forward_step(model, state, self._frame[0])
-        progress, variance = _kernels.main_progress(model.lengths, state.moments, state.main, 0)
-        self._frame_progress[0] = progress
-        self._frame_variance[0] = variance
+        for kernel, args in self._calls or self._entries():
+            kernel(*args)
+        state = self._state
+        return FollowerOutput(float(self._frame_progress[0]), float(self._frame_variance[0]),
+                              float(state.loglik[0]), float(state.frame_loglik[0, 0]))
+
+    def _entries(self):
+        """``step``'s kernels and their arguments, resolved once for its own arrays
+        (``followers._jit.entry``: no type resolution per frame)."""
+        args = (self._forward.model, self._state, self._frame[0], self._frame_progress,
+                self._frame_variance)
+        calls = [(compiled_entry(_kernels.follow_frame, *args), args)]
         if self._tempo is not None:
-            _kernels.tempo_calibrate(self._frame_progress, self._frame_variance,
-                                     self.length - 1.0, self._tempo, self._tempo_state)
-        self._widen(self._frame, self._on, self._frame_progress, self._frame_variance)
-        variance = float(self._frame_variance[0])
-        return FollowerOutput(float(progress), float(variance), float(state.loglik[0]),
-                              float(state.frame_loglik[0, 0]))
+            args = (self._frame_progress, self._frame_variance, self.length - 1.0, self._tempo,
+                    self._tempo_state)
+            calls.append((compiled_entry(_kernels.tempo_calibrate, *args), args))
+        c = self.config
+        if c.residual_cap > 1.0:
+            args = (*self._intervals, self._on, self._frame, self._frame_progress,
+                    self._frame_variance, c.residual_memory, c.residual_cap,
+                    min(c.outlier_sigmas, 1e300), float(c.resolution), self._interval_state)
+            calls.append((compiled_entry(widen, *args), args))
+        self._calls = tuple(calls)
+        return self._calls
 
     def follow(self, X, *, reset: bool = True) -> FollowerTrace:
         """Follow a whole sequence ``X (N, D) float`` (from a fresh start unless ``reset=False``).

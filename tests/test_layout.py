@@ -37,7 +37,8 @@ LAYERS = {
         ["capture.spec", "capture.devices"],
     ],
     "followers": [
-        ["followers._jit", "followers._cells", "followers._kernels", "followers._bank_kernels",
+        ["followers._jit", "followers._exp", "followers._cells", "followers._kernels",
+         "followers._bank_kernels",
          "followers._baum_welch", "followers.bank_output",
          "followers.config", "followers.defaults", "followers.preprocessing",
          "followers.transitions", "followers.datasets", "followers.model",

@@ -26,7 +26,8 @@ from followers.defaults import as_sigma, as_window, default_window
 from followers.demos import Demonstrations, combine
 from followers.follower import Follower, adaptation, chain, resolve_config
 from followers.model import build_forward, check_frame, forward_state, reset_forward
-from followers.intervals import interval_state, reset_interval, stacked, widen
+from followers.intervals import (interval_state, reset_interval, stacked, widen,
+                                 widen_arguments)
 from followers.still import RELEASE, StillState, StillWindow, build_still, judge, still_mask
 
 
@@ -313,25 +314,21 @@ class FollowerBank:
         (``followers._jit.entry``)."""
         step = compiled_entry(_bank_kernels.bank_step, self._forward.model, self._state,
                               self._model, self._bank, self._frame[0])
-        widen_shown = None
-        c = self.config.follower
-        if c.residual_cap > 1.0:
-            self._widen_args = (*self._intervals, self._shown, self._frame, self._shown_progress,
-                                self._shown_variance, c.residual_memory, c.residual_cap,
-                                min(c.outlier_sigmas, 1e300), float(c.resolution),
-                                self._interval_state)
-            widen_shown = compiled_entry(widen, *self._widen_args)
+        self._widen_args = widen_arguments(
+            self._intervals, self.config.follower, self._shown, self._frame,
+            self._shown_progress, self._shown_variance, self._interval_state)
+        widen_shown = (None if self._widen_args is None
+                       else compiled_entry(widen, *self._widen_args))
         gate = compiled_entry(_bank_kernels.gate, self._state, self._model, self._bank, -1)
         self._kernels = (step, widen_shown, gate)
         return self._kernels
 
     def _widen(self, X, shown, progress, variance) -> None:
         """``variance`` of the ``shown`` actions widened in place (``followers.intervals``)."""
-        c = self.config.follower
-        if c.residual_cap > 1.0:
-            widen(*self._intervals, shown, X, progress, variance, c.residual_memory,
-                  c.residual_cap, min(c.outlier_sigmas, 1e300), float(c.resolution),
-                  self._interval_state)
+        args = widen_arguments(self._intervals, self.config.follower, shown, X, progress,
+                               variance, self._interval_state)
+        if args is not None:
+            widen(*args)
 
     def _publish(self, judged: bool = False, quiet: bool = False) -> None:
         """The output from the bank's state; ``judged``: the still stage judges this frame

@@ -11,7 +11,8 @@ from followers._jit import entry as compiled_entry
 from followers.config import FollowerConfig
 from followers.defaults import as_sigma, as_template, as_window, default_sigma, default_window
 from followers.demos import combine, is_takes
-from followers.intervals import interval_state, reset_interval, stacked, widen
+from followers.intervals import (interval_state, reset_interval, stacked, widen,
+                                 widen_arguments)
 from followers.model import build_forward, check_frame, forward_state, reset_forward
 from followers.transitions import TransitionModel, transition_model
 
@@ -231,11 +232,9 @@ class Follower:
             args = (self._frame_progress, self._frame_variance, self.length - 1.0, self._tempo,
                     self._tempo_state)
             calls.append((compiled_entry(_kernels.tempo_calibrate, *args), args))
-        c = self.config
-        if c.residual_cap > 1.0:
-            args = (*self._intervals, self._on, self._frame, self._frame_progress,
-                    self._frame_variance, c.residual_memory, c.residual_cap,
-                    min(c.outlier_sigmas, 1e300), float(c.resolution), self._interval_state)
+        args = widen_arguments(self._intervals, self.config, self._on, self._frame,
+                               self._frame_progress, self._frame_variance, self._interval_state)
+        if args is not None:
             calls.append((compiled_entry(widen, *args), args))
         self._calls = tuple(calls)
         return self._calls
@@ -264,11 +263,10 @@ class Follower:
 
     def _widen(self, X, which, progress, variance) -> None:
         """``variance`` widened in place by the residual's autocorrelation."""
-        c = self.config
-        if c.residual_cap > 1.0:
-            widen(*self._intervals, which, X, progress, variance, c.residual_memory,
-                  c.residual_cap, min(c.outlier_sigmas, 1e300), float(c.resolution),
-                  self._interval_state)
+        args = widen_arguments(self._intervals, self.config, which, X, progress, variance,
+                               self._interval_state)
+        if args is not None:
+            widen(*args)
 
     def __repr__(self) -> str:
         return (f"Follower(T={self.length}, D={self.channels}, window={self._window}, "

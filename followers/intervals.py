@@ -102,6 +102,16 @@ def widen(templates, sigmas, offsets, which, X, progress, variance, memory, cap,
         variance[n] += (factor - 1.0) * (variance[n] + width * width / 12.0)
 
 
+def widen_arguments(intervals, config, which, X, progress, variance, state):
+    """``widen``'s arguments for the ``stacked`` templates ``intervals`` under a
+    ``FollowerConfig``; None when the config does not widen (``residual_cap`` <= 1)."""
+    if not config.residual_cap > 1.0:
+        return None
+    return (*intervals, which, X, progress, variance, config.residual_memory,
+            config.residual_cap, min(config.outlier_sigmas, 1e300), float(config.resolution),
+            state)
+
+
 def stacked(templates, sigmas):
     """(templates (sum T_k, D), sigmas (sum T_k, D), offsets (K + 1,) int64) for ``widen``."""
     offsets = np.zeros(len(templates) + 1, dtype=np.int64)

@@ -173,6 +173,30 @@ def test_source_feed_silence_failure_and_rejoin():
     assert feed.latency == pytest.approx(0.1)                # locked again, to the new input
 
 
+def test_a_feed_whose_frames_come_in_late_is_late_not_silent():
+    """A busy tracker delivers each frame 0.7 s after the moment it stamps: that is more than
+    stale_after, yet frames keep coming in, so the performer stays followed (on the newest
+    frame) and goes silent only once nothing has come in for stale_after."""
+    now = [0.0]
+    source = ListSource(("a",))
+    feed = SourceFeed(lambda: source, name="p", stale_after=0.5, latency=0.05,
+                      clock=lambda: now[0])
+    statuses = []
+    for k in range(40):                          # 2 s at 20 frames a second
+        now[0] = 0.7 + 0.05 * k
+        source.queue.append(ListSource.Frame(0.05 * k, [float(k)]))
+        values = feed.poll(now[0], due=now[0])
+        statuses.append(feed.status)
+        if feed.status == OK:
+            assert values == pytest.approx([k])          # the newest: later ones are not in
+    assert statuses[-30:] == [OK] * 30 and feed.late > 0
+    last = now[0]
+    now[0] = last + 0.45
+    assert feed.poll(now[0], due=now[0]) is not None and feed.status == OK
+    now[0] = last + 0.55
+    assert feed.poll(now[0], due=now[0]) is None and feed.status == SILENT
+
+
 def arrivals(rng, times, *, jitter):
     """Arrival stamps of samples sent at `times`: a little late, each by its own amount."""
     return times + rng.uniform(0.0, jitter, times.size)

@@ -208,7 +208,7 @@ class SourceFeed:
         self.late = 0                # frames that had to use the newest sample (next not there)
         self.rebased = 0             # samples whose timestamp was not on the capture clock
         self.latency: float | None = None   # [s] fixed once locked; None while unlocked
-        self.last_arrival = -math.inf
+        self.last_arrival = -math.inf   # [s] capture clock: when a frame last came in
         self.next_retry = -math.inf
         self._history: _History | None = None
         self._out = np.empty(0)
@@ -267,7 +267,7 @@ class SourceFeed:
                 t = history.last_time()
             history.append(t, values)
             self.frames += 1
-            self.last_arrival = t
+            self.last_arrival = now
 
     def poll(self, t: float, *, due: float | None = None) -> np.ndarray | None:
         """Values (D,) for the frame due at `due` [s, capture clock; default now], or None
@@ -296,7 +296,9 @@ class SourceFeed:
         elif _status(self.source) == "disconnected":
             # a capture source reconnects by itself: keep it and keep asking
             status, message = FAILED, "the device is disconnected"
-        elif due - max(newest, self._opened_at) > self.stale_after:
+        elif due - max(self.last_arrival, self._opened_at) > self.stale_after:
+            # judged by arrival, not by the frames' own stamps: a busy tracker that delivers
+            # each frame late is a late input, not a silent one
             status, message = SILENT, f"no input for {self.stale_after:g} s"
         if status is not None:
             if self.status != status:

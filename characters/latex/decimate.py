@@ -104,16 +104,12 @@ def _neighbours(v, faces, vf, vf_n, out):
 
 
 @njit(**_JIT)
-def _evaluate(v, vertices, faces, vf, vf_n, q, locked, lam, cos_tau, inv_h, area_floor,
-              nb_v, nb_u):
-    """(cost, best neighbour) of removing v; (inf, -1) when no collapse is valid."""
-    nf = vf_n[v]
-    if locked[v] or nf < 3:
-        return np.inf, -1
-    # v's vertex normal (area weighted)
-    nvx = 0.0
-    nvy = 0.0
-    nvz = 0.0
+def _vertex_normal(v, vertices, faces, vf, nf):
+    """v's area-weighted unit normal as a 3-tuple, and the normal's length before scaling
+    (0: undefined)."""
+    nx = 0.0
+    ny = 0.0
+    nz = 0.0
     for k in range(nf):
         f = vf[v, k]
         a, b, c = faces[f, 0], faces[f, 1], faces[f, 2]
@@ -123,15 +119,95 @@ def _evaluate(v, vertices, faces, vf, vf_n, q, locked, lam, cos_tau, inv_h, area
         wx = vertices[c, 0] - vertices[a, 0]
         wy = vertices[c, 1] - vertices[a, 1]
         wz = vertices[c, 2] - vertices[a, 2]
-        nvx += uy * wz - uz * wy
-        nvy += uz * wx - ux * wz
-        nvz += ux * wy - uy * wx
-    length = np.sqrt(nvx * nvx + nvy * nvy + nvz * nvz)
+        nx += uy * wz - uz * wy
+        ny += uz * wx - ux * wz
+        nz += ux * wy - uy * wx
+    length = np.sqrt(nx * nx + ny * ny + nz * nz)
+    if length == 0.0:
+        return (0.0, 0.0, 0.0), 0.0
+    return (nx / length, ny / length, nz / length), length
+
+
+@njit(**_JIT)
+def _link_holds(count_v, nb_v, count_u, nb_u, vf_n):
+    """The link condition of collapsing v into u: exactly two shared neighbours, none of
+    valence 3 (else the collapse pinches the surface)."""
+    common = 0
+    for i in range(count_v):
+        for j in range(count_u):
+            if nb_v[i] == nb_u[j]:
+                common += 1
+                if vf_n[nb_v[i]] <= 3:
+                    return False
+    return common == 2
+
+
+@njit(**_JIT)
+def _worst_new_face(v, u, surface, normal, rule):
+    """The worst roundness error (1 - R*) among the faces that collapsing v into u creates;
+    -1 when the collapse is rejected (a sliver, or a face normal turned past tau)."""
+    vertices, faces, vf, vf_n = surface[0], surface[1], surface[2], surface[3]
+    cos_tau, area_floor = rule[1], rule[3]
+    nvx, nvy, nvz = normal
+    worst = 0.0
+    for k in range(vf_n[v]):
+        f = vf[v, k]
+        i0, i1, i2 = faces[f, 0], faces[f, 1], faces[f, 2]
+        if i0 == u or i1 == u or i2 == u:
+            continue
+        # the face before (i0 i1 i2) and after (v replaced by u)
+        ax, ay, az = vertices[i0, 0], vertices[i0, 1], vertices[i0, 2]
+        bx, by, bz = vertices[i1, 0], vertices[i1, 1], vertices[i1, 2]
+        cx, cy, cz = vertices[i2, 0], vertices[i2, 1], vertices[i2, 2]
+        ox = (by - ay) * (cz - az) - (bz - az) * (cy - ay)
+        oy = (bz - az) * (cx - ax) - (bx - ax) * (cz - az)
+        oz = (bx - ax) * (cy - ay) - (by - ay) * (cx - ax)
+        if i0 == v:
+            ax, ay, az = vertices[u, 0], vertices[u, 1], vertices[u, 2]
+        elif i1 == v:
+            bx, by, bz = vertices[u, 0], vertices[u, 1], vertices[u, 2]
+        else:
+            cx, cy, cz = vertices[u, 0], vertices[u, 1], vertices[u, 2]
+        nx = (by - ay) * (cz - az) - (bz - az) * (cy - ay)
+        ny = (bz - az) * (cx - ax) - (bx - ax) * (cz - az)
+        nz = (bx - ax) * (cy - ay) - (by - ay) * (cx - ax)
+        double_area = np.sqrt(nx * nx + ny * ny + nz * nz)
+        if double_area <= area_floor:
+            return -1.0
+        nx /= double_area
+        ny /= double_area
+        nz /= double_area
+        old_length = np.sqrt(ox * ox + oy * oy + oz * oz)
+        if nx * nvx + ny * nvy + nz * nvz < cos_tau:
+            return -1.0
+        if old_length > 0.0 and (nx * ox + ny * oy + nz * oz) / old_length < cos_tau:
+            return -1.0
+        la = np.sqrt((bx - ax) ** 2 + (by - ay) ** 2 + (bz - az) ** 2)
+        lb = np.sqrt((cx - bx) ** 2 + (cy - by) ** 2 + (cz - bz) ** 2)
+        lc = np.sqrt((ax - cx) ** 2 + (ay - cy) ** 2 + (az - cz) ** 2)
+        circumradius = la * lb * lc / (2.0 * double_area)
+        r_star = 0.5773502691896258 * min(la, lb, lc) / circumradius
+        if 1.0 - r_star > worst:
+            worst = 1.0 - r_star
+    return worst
+
+
+@njit(**_JIT)
+def _evaluate(v, surface, rule, scratch):
+    """(cost, best neighbour) of removing v; (inf, -1) when no collapse is valid.
+
+    surface : (vertices, faces, vf, vf_n, q, locked), the mesh as the collapses left it
+    rule : (lambda, cos tau, 1 / h, area floor), the cost's weights and rejection limits
+    scratch : (nb_v, nb_u), two neighbour lists of 2 * capacity + 2 entries"""
+    vertices, faces, vf, vf_n, q, locked = surface
+    lam, inv_h = rule[0], rule[2]
+    nb_v, nb_u = scratch
+    nf = vf_n[v]
+    if locked[v] or nf < 3:
+        return np.inf, -1
+    normal, length = _vertex_normal(v, vertices, faces, vf, nf)
     if length == 0.0:
         return np.inf, -1
-    nvx /= length
-    nvy /= length
-    nvz /= length
     count_v = _neighbours(v, faces, vf, vf_n, nb_v)
     if count_v != nf:  # a closed manifold vertex has as many neighbours as faces
         return np.inf, -1
@@ -143,62 +219,10 @@ def _evaluate(v, vertices, faces, vf, vf_n, q, locked, lam, cos_tau, inv_h, area
         if new_valence > vf.shape[1] or new_valence < 3:
             continue
         count_u = _neighbours(u, faces, vf, vf_n, nb_u)
-        common = 0
-        thin = False
-        for i in range(count_v):
-            for j in range(count_u):
-                if nb_v[i] == nb_u[j]:
-                    common += 1
-                    if vf_n[nb_v[i]] <= 3:
-                        thin = True
-        # link condition (exactly two shared neighbours), else the collapse pinches the surface
-        if common != 2 or thin:
+        if not _link_holds(count_v, nb_v, count_u, nb_u, vf_n):
             continue
-        ok = True
-        worst = 0.0
-        for k in range(nf):
-            f = vf[v, k]
-            i0, i1, i2 = faces[f, 0], faces[f, 1], faces[f, 2]
-            if i0 == u or i1 == u or i2 == u:
-                continue
-            # the face before (i0 i1 i2) and after (v replaced by u)
-            ax, ay, az = vertices[i0, 0], vertices[i0, 1], vertices[i0, 2]
-            bx, by, bz = vertices[i1, 0], vertices[i1, 1], vertices[i1, 2]
-            cx, cy, cz = vertices[i2, 0], vertices[i2, 1], vertices[i2, 2]
-            ox = (by - ay) * (cz - az) - (bz - az) * (cy - ay)
-            oy = (bz - az) * (cx - ax) - (bx - ax) * (cz - az)
-            oz = (bx - ax) * (cy - ay) - (by - ay) * (cx - ax)
-            if i0 == v:
-                ax, ay, az = vertices[u, 0], vertices[u, 1], vertices[u, 2]
-            elif i1 == v:
-                bx, by, bz = vertices[u, 0], vertices[u, 1], vertices[u, 2]
-            else:
-                cx, cy, cz = vertices[u, 0], vertices[u, 1], vertices[u, 2]
-            nx = (by - ay) * (cz - az) - (bz - az) * (cy - ay)
-            ny = (bz - az) * (cx - ax) - (bx - ax) * (cz - az)
-            nz = (bx - ax) * (cy - ay) - (by - ay) * (cx - ax)
-            double_area = np.sqrt(nx * nx + ny * ny + nz * nz)
-            if double_area <= area_floor:
-                ok = False
-                break
-            nx /= double_area
-            ny /= double_area
-            nz /= double_area
-            old_length = np.sqrt(ox * ox + oy * oy + oz * oz)
-            if nx * nvx + ny * nvy + nz * nvz < cos_tau:
-                ok = False
-                break
-            if old_length > 0.0 and (nx * ox + ny * oy + nz * oz) / old_length < cos_tau:
-                ok = False
-                break
-            la = np.sqrt((bx - ax) ** 2 + (by - ay) ** 2 + (bz - az) ** 2)
-            lb = np.sqrt((cx - bx) ** 2 + (cy - by) ** 2 + (cz - bz) ** 2)
-            lc = np.sqrt((ax - cx) ** 2 + (ay - cy) ** 2 + (az - cz) ** 2)
-            circumradius = la * lb * lc / (2.0 * double_area)
-            r_star = 0.5773502691896258 * min(la, lb, lc) / circumradius
-            if 1.0 - r_star > worst:
-                worst = 1.0 - r_star
-        if not ok:
+        worst = _worst_new_face(v, u, surface, normal, rule)
+        if worst < 0.0:
             continue
         dq = _quadric_error(q, u, v, vertices[u])
         cost = lam * worst + (1.0 - lam) * np.sqrt(max(dq, 0.0)) * inv_h
@@ -272,24 +296,24 @@ def _setup(vertices, faces, capacity):
 
 
 @njit(**_JIT)
-def removal_cost_kernel(vertices, faces, locked, lam, cos_tau, inv_h, area_floor, capacity):
-    """Initial removal priority of every vertex: cost (V,) and best neighbour (V,) (-1: none)."""
+def removal_cost_kernel(vertices, faces, locked, rule, capacity):
+    """Initial removal priority of every vertex: cost (V,) and best neighbour (V,) (-1: none).
+    rule as in _evaluate."""
     vf, vf_n, q = _setup(vertices, faces, capacity)
-    nb_v = np.empty(2 * capacity + 2, dtype=np.int64)
-    nb_u = np.empty(2 * capacity + 2, dtype=np.int64)
+    surface = (vertices, faces, vf, vf_n, q, locked)
+    scratch = (np.empty(2 * capacity + 2, dtype=np.int64),
+               np.empty(2 * capacity + 2, dtype=np.int64))
     cost = np.full(vertices.shape[0], np.inf)
     target = np.full(vertices.shape[0], -1, dtype=np.int64)
     for v in range(vertices.shape[0]):
-        cost[v], target[v] = _evaluate(v, vertices, faces, vf, vf_n, q, locked, lam, cos_tau,
-                                       inv_h, area_floor, nb_v, nb_u)
+        cost[v], target[v] = _evaluate(v, surface, rule, scratch)
     return cost, target
 
 
 @njit(**_JIT)
-def decimate_kernel(vertices, faces, locked, target_count, lam, cos_tau, inv_h, area_floor,
-                    capacity):
-    """Half-edge collapse decimation; returns (alive (V,) bool, face_alive (F,) bool,
-    faces (F, 3) int64 rewritten, removed count, stopped_early)."""
+def decimate_kernel(vertices, faces, locked, target_count, rule, capacity):
+    """Half-edge collapse decimation (rule as in _evaluate); returns (alive (V,) bool,
+    face_alive (F,) bool, faces (F, 3) int64 rewritten, removed count, stopped_early)."""
     vertex_count = vertices.shape[0]
     face_count = faces.shape[0]
     faces = faces.copy()
@@ -300,16 +324,16 @@ def decimate_kernel(vertices, faces, locked, target_count, lam, cos_tau, inv_h, 
     for i in range(vertex_count):
         if alive[i]:
             alive_count += 1
-    nb_v = np.empty(2 * capacity + 2, dtype=np.int64)
-    nb_u = np.empty(2 * capacity + 2, dtype=np.int64)
+    surface = (vertices, faces, vf, vf_n, q, locked)
+    scratch = (np.empty(2 * capacity + 2, dtype=np.int64),
+               np.empty(2 * capacity + 2, dtype=np.int64))
     nb_w = np.empty(2 * capacity + 2, dtype=np.int64)
     stamp = np.zeros(vertex_count, dtype=np.int64)
     heap = [(0.0, np.int64(0), np.int64(0))]
     heap.pop()
     for v in range(vertex_count):
         if alive[v]:
-            cost, u = _evaluate(v, vertices, faces, vf, vf_n, q, locked, lam, cos_tau, inv_h,
-                                area_floor, nb_v, nb_u)
+            cost, u = _evaluate(v, surface, rule, scratch)
             if u >= 0:
                 heap.append((cost, np.int64(v), np.int64(0)))
     heapq.heapify(heap)
@@ -318,8 +342,7 @@ def decimate_kernel(vertices, faces, locked, target_count, lam, cos_tau, inv_h, 
         cost, v, s = heapq.heappop(heap)
         if not alive[v] or s != stamp[v]:
             continue
-        fresh, u = _evaluate(v, vertices, faces, vf, vf_n, q, locked, lam, cos_tau, inv_h,
-                             area_floor, nb_v, nb_u)
+        fresh, u = _evaluate(v, surface, rule, scratch)
         stamp[v] += 1
         if u < 0:
             continue
@@ -334,8 +357,7 @@ def decimate_kernel(vertices, faces, locked, target_count, lam, cos_tau, inv_h, 
         for i in range(count + 1):
             w = u if i == count else nb_w[i]
             stamp[w] += 1
-            c2, u2 = _evaluate(w, vertices, faces, vf, vf_n, q, locked, lam, cos_tau, inv_h,
-                               area_floor, nb_v, nb_u)
+            c2, u2 = _evaluate(w, surface, rule, scratch)
             if u2 >= 0:
                 heapq.heappush(heap, (c2, w, stamp[w]))
     return alive, face_alive, faces, removed, alive_count > target_count
@@ -356,6 +378,12 @@ class Decimation:
     faces: np.ndarray
     stopped_early: bool
     target_vertices: int
+
+
+def _rule(roundness_weight: float, normal_threshold: float, h: float) -> tuple:
+    """The kernels' cost rule: (lambda, cos tau, 1 / h, area floor [m^2 doubled])."""
+    return (float(roundness_weight), math.cos(math.radians(normal_threshold)), 1.0 / h,
+            (h * 1e-6) ** 2)
 
 
 def target_edge_length(vertices: np.ndarray, faces: np.ndarray, vertex_count: int) -> float:
@@ -394,8 +422,8 @@ def decimate(vertices: np.ndarray, faces: np.ndarray, *, target_vertices: int,
             mask[locked.astype(np.int64)] = True
     h = target_edge_length(vertices, faces, target_vertices)
     alive, face_alive, new_faces, _, stopped = decimate_kernel(
-        vertices, faces, mask, target_vertices, float(roundness_weight),
-        math.cos(math.radians(normal_threshold)), 1.0 / h, (h * 1e-6) ** 2, _CAPACITY)
+        vertices, faces, mask, target_vertices, _rule(roundness_weight, normal_threshold, h),
+        _CAPACITY)
     kept = np.flatnonzero(alive)
     renumber = np.full(len(vertices), -1, dtype=np.int64)
     renumber[kept] = np.arange(len(kept))
@@ -417,9 +445,8 @@ def removal_costs(vertices: np.ndarray, faces: np.ndarray, *, target_vertices: i
     if locked is not None:
         mask[np.asarray(locked)] = True
     h = target_edge_length(vertices, faces, target_vertices)
-    return removal_cost_kernel(vertices, faces, mask, float(roundness_weight),
-                               math.cos(math.radians(normal_threshold)), 1.0 / h,
-                               (h * 1e-6) ** 2, _CAPACITY)
+    return removal_cost_kernel(vertices, faces, mask,
+                               _rule(roundness_weight, normal_threshold, h), _CAPACITY)
 
 
 # --- comparison with plain quadric decimation -----------------------------------------------

@@ -10,6 +10,7 @@ astronaut and matplotlib's Grace Hopper, each a face and an upper body.
 - the face covered, then no one there: NaN and status "not seen", then found again;
 - a face far from the camera (under a tenth of the frame): found and measured all the same;
 - the body rotated: the pose tracker's lean follows; no hand in either picture: NaN;
+- the palm search, while no hand is tracked, on one frame in `search_every`;
 - One Euro smoothing on a noisy picture; `mop record` from a camera; the demo's glove performer
   given `camera:...:hands`; the shipped webcam session's takes followed.
 """
@@ -217,6 +218,27 @@ def test_pose_lean_follows_a_rotated_body_and_no_hand_is_nan(tmp_path, photo):
     assert np.all(np.isnan(wrists) | ((wrists >= 0) & (wrists <= 1)))
     hands = track(tmp_path, [place(photo, placement(photo))] * 5, tracker="hands")
     assert hands.shape[1] == 2 * len(HAND_CHANNELS) and np.isnan(hands).all()
+
+
+def test_the_palm_search_runs_one_frame_in_search_every_while_no_hand_is_tracked():
+    """No hand in the picture: the palm detector (observed in MediaPipe's graph) searches the
+    first frame, then one frame in `search_every`; after a reset, the next frame; with
+    search_every=1 every frame, as MediaPipe's own graph does. Nothing is found on any."""
+    from capture.camera.trackers import make_tracker
+    frame = place(astronaut(), placement(astronaut()))
+    for every, expected in ((3, "S..S..S..S"), (1, "SSSSSSSSSS"), (4, "S...S...S.")):
+        tracker = make_tracker("hands", search_every=every)
+        searched = ""
+        for _ in range(10):
+            assert np.isnan(tracker.process(frame)).all()
+            searched += "S" if tracker.searched else "."
+        assert searched == expected
+        tracker.reset()
+        tracker.process(frame)
+        assert tracker.searched and tracker.describe()["search_every"] == every
+        tracker.close()
+    with pytest.raises(ValueError, match="search_every"):
+        make_tracker("hands", search_every=0)
 
 
 def test_smoothing_steadies_a_still_noisy_face_and_follows_a_turn(tmp_path, rng):

@@ -183,6 +183,36 @@ def assign_sides(hands: list[tuple[str, float, tuple[float, float]]],
     return []
 
 
+# the hands graph's palm search, gated from Python (see `_searching_hands`)
+_SKIP_SEARCH, _SEARCHED, _ENOUGH_HANDS = ("skip_palm_search", "palm_detection_image",
+                                          "DISALLOW:prev_has_enough_hands")
+
+
+def _searching_hands(solutions):
+    """MediaPipe's Hands solution whose palm search (its palm detector) runs on the frames the
+    caller asks for: the gate that skips the search once `max_num_hands` hands are tracked
+    reads a graph input, `_SKIP_SEARCH` (a bool packet with each frame), instead of the graph's
+    own count; the gate's output, the image the palm detector reads, is observed as
+    `_SEARCHED` (an empty packet on a frame not searched). A tracked hand is followed on every
+    frame as before; only the search for a new one is gated."""
+    from mediapipe.python.solution_base import PacketDataType
+
+    class SearchingHands(solutions.hands.Hands):
+        def _initialize_graph_interface(self, *args, **kwargs):
+            config = super()._initialize_graph_interface(*args, **kwargs)
+            gates = [node for node in config.node if _ENOUGH_HANDS in node.input_stream]
+            if len(gates) != 1:
+                raise RuntimeError("this MediaPipe's hands graph has no palm search gate "
+                                   "where mop looks for it (MediaPipe 0.10.x)")
+            streams = gates[0].input_stream
+            streams[list(streams).index(_ENOUGH_HANDS)] = f"DISALLOW:{_SKIP_SEARCH}"
+            config.input_stream.append(_SKIP_SEARCH)
+            self._output_stream_type_info[_SEARCHED] = PacketDataType.IMAGE_FRAME
+            return config
+
+    return SearchingHands
+
+
 class MediapipeTracker(Tracker):
     """Base of the markerless trackers: RGB conversion into a reused buffer, one MediaPipe
     solution in video mode, `seen` (True when the last frame had a target), `close()`."""
@@ -201,7 +231,7 @@ class MediapipeTracker(Tracker):
         """One small blank frame through the model: loading the model happens here, when the
         source opens, not on the performer's first frame (about 0.1-0.2 s). Nothing is in
         the blank frame, so nothing is tracked after it."""
-        self._solution.process(np.zeros((64, 64, 3), np.uint8))
+        self._run(np.zeros((64, 64, 3), np.uint8))
 
     def _restart(self) -> None:
         """MediaPipe's graph started afresh (nothing tracked), its models loaded by a blank
@@ -219,13 +249,19 @@ class MediapipeTracker(Tracker):
         solution = self._solution
         solution._graph_outputs.clear()
         solution._simulated_timestamp += 33333
+        stamp = solution._simulated_timestamp
         solution._graph.add_packet_to_input_stream(
-            stream=self._input, packet=solution._make_packet(self._input_type, rgb).at(
-                solution._simulated_timestamp))
+            stream=self._input, packet=solution._make_packet(self._input_type, rgb).at(stamp))
+        for stream, packet in self._more_inputs():
+            solution._graph.add_packet_to_input_stream(stream=stream, packet=packet.at(stamp))
         solution._graph.wait_until_idle()
         outputs, types = solution._graph_outputs, solution._output_stream_type_info
         return [solution._get_packet_content(types[name], outputs[name])
                 if name in outputs else None for name in streams]
+
+    def _more_inputs(self) -> tuple:
+        """(stream, packet) pairs the graph takes with each frame besides the image."""
+        return ()
 
     def _graph_ready(self) -> None:
         """Read the solution's input stream once it is built (for `_run`)."""
@@ -412,9 +448,13 @@ class HandsTracker(MediapipeTracker):
     steady by `assign_sides`.
 
     model : "full" (default) or "lite" (faster, a little less precise).
-    max_hands : 2 (default) or 1. MediaPipe looks for more hands (its palm detector, the
-        costly part) on every frame in which it tracks fewer than this: with one hand in view,
-        max_hands=1 saves that search.
+    max_hands : 2 (default) or 1. While fewer hands than this are tracked, the palm detector
+        (the costly part) searches for more: with one hand in view, max_hands=1 saves that.
+    search_every : the palm search runs on one frame in this many (default 3) while fewer than
+        `max_hands` hands are tracked, and on the next frame whenever a tracked hand is lost;
+        tracked hands are followed on every frame. 1: every frame, as MediaPipe does. A hand
+        coming into view is found up to `search_every - 1` frames later (67 ms at 30 fps);
+        the search takes about as long as the rest of a frame with one hand.
     mirrored : the camera already mirrors its picture (a "selfie" view); default False, as
         OpenCV delivers it.
     """
@@ -422,14 +462,19 @@ class HandsTracker(MediapipeTracker):
     SIDES = ("right", "left")
 
     def __init__(self, *, hand: str = "right", model: str = "full", mirrored: bool = False,
-                 max_hands: int = 2, min_detection: float = 0.5, min_tracking: float = 0.5):
+                 max_hands: int = 2, search_every: int = 3, min_detection: float = 0.5,
+                 min_tracking: float = 0.5):
         if hand not in self.SIDES:
             raise ValueError(f"hand must be 'right' or 'left', got {hand!r}")
         if model not in ("full", "lite"):
             raise ValueError(f"model must be 'full' or 'lite', got {model!r}")
         if max_hands not in (1, 2):
             raise ValueError(f"max_hands must be 1 or 2, got {max_hands!r}")
+        if not isinstance(search_every, int) or not 1 <= search_every <= 30:
+            raise ValueError(f"search_every is a number of frames, 1 to 30, "
+                             f"got {search_every!r}")
         self.max_hands = int(max_hands)
+        self.search_every = search_every
         self.hand = hand
         self.other = "left" if hand == "right" else "right"
         self.model = model
@@ -438,8 +483,13 @@ class HandsTracker(MediapipeTracker):
         self.scales = ((1.0,) * 6 + (0.2, 0.2, 1.0)) * 2
         super().__init__(min_detection=min_detection, min_tracking=min_tracking)
         _, solutions = _mediapipe()
+        from mediapipe.python import packet_creator
+        self._bool_packet = packet_creator.create_bool
+        self._search_wait = 0        # frames until the palm search runs again
+        self._tracked = 0            # hands tracked on the last frame
+        self.searched = False        # the palm detector searched the last frame
         with native_notices():
-            self._solution = solutions.hands.Hands(
+            self._solution = _searching_hands(solutions)(
                 static_image_mode=False, max_num_hands=self.max_hands,
                 model_complexity=1 if model == "full" else 0,
                 min_detection_confidence=self.min_detection,
@@ -452,7 +502,23 @@ class HandsTracker(MediapipeTracker):
 
     def describe(self) -> dict:
         return {**super().describe(), "hand": self.hand, "model": self.model,
-                "mirrored": self.mirrored, "max_hands": self.max_hands}
+                "mirrored": self.mirrored, "max_hands": self.max_hands,
+                "search_every": self.search_every}
+
+    def _more_inputs(self) -> tuple:
+        search = self._tracked < self.max_hands and self._search_wait <= 0
+        return ((_SKIP_SEARCH, self._bool_packet(not search)),)
+
+    def _searching(self, searched: bool, tracked: int) -> None:
+        """After a frame: when the palm search runs next."""
+        self.searched = searched
+        if searched:
+            self._search_wait = self.search_every - 1
+        elif tracked < self._tracked:
+            self._search_wait = 0          # a hand was lost: look for it on the next frame
+        else:
+            self._search_wait -= 1
+        self._tracked = tracked
 
     def _side(self, label: str) -> str:
         """The performer's side of a MediaPipe handedness label (which assumes a mirrored
@@ -464,8 +530,10 @@ class HandsTracker(MediapipeTracker):
 
     def process(self, image: np.ndarray) -> np.ndarray:
         rgb = self._rgb_of(image)
-        found, worlds, labels = (value or [] for value in self._run(
-            rgb, "multi_hand_landmarks", "multi_hand_world_landmarks", "multi_handedness"))
+        *streams, searched = self._run(rgb, "multi_hand_landmarks", "multi_hand_world_landmarks",
+                                       "multi_handedness", _SEARCHED)
+        found, worlds, labels = (value or [] for value in streams)
+        self._searching(searched is not None, len(found))
         out = np.full(len(self.channels), np.nan)
         hands = []
         for landmarks, handedness in zip(found, labels):
@@ -495,6 +563,7 @@ class HandsTracker(MediapipeTracker):
         return out
 
     def reset(self) -> None:
+        self._search_wait, self._tracked, self.searched = 0, 0, False
         super().reset()
         self._last_wrist = {side: None for side in self.SIDES}
 

@@ -408,6 +408,61 @@ def bench_hand_landmarks(repeats: int, search: float) -> None:
           f"{1e3 * (hand + search / 3):6.2f} ms with search_every=3")
 
 
+def bench_graphs(repeats: int, folder: Path) -> None:
+    """Where MediaPipe's graphs spend a 640x480 frame, calculator by calculator: MediaPipe's
+    own profiler (switched on in each graph's configuration), wall time inside each
+    calculator summed over the frames. Shares hold under load; milliseconds grow with it."""
+    import collections
+    from mediapipe.framework import calculator_profile_pb2
+    from mediapipe.python import solution_base
+    from capture.camera.markerless import models_status
+    from capture.camera.trackers import make_tracker
+    section("MediaPipe's graphs calculator by calculator (its profiler), 640x480, one core")
+    if not models_status()["installed"]:
+        print("  skipped: MediaPipe's models are not installed")
+        return
+    build = solution_base.SolutionBase._initialize_graph_interface
+
+    def profiled(self, *args, **kwargs):
+        config = build(self, *args, **kwargs)
+        config.profiler_config.enable_profiler = True
+        config.profiler_config.trace_enabled = True        # writes the profiles to files
+        config.profiler_config.trace_log_path = str(logs) + "/"
+        config.profiler_config.trace_log_interval_count = 5
+        config.profiler_config.trace_log_count = 1000
+        return config
+    affinity = os.sched_getaffinity(0)
+    os.sched_setaffinity(0, {max(affinity)})
+    image = astronaut_frame()
+    try:
+        for name, options in (("face", {}), ("hands", {"search_every": 1}), ("pose", {})):
+            logs = folder / f"profile_{name}"
+            logs.mkdir()
+            solution_base.SolutionBase._initialize_graph_interface = profiled
+            try:
+                tracker = make_tracker(name, **options)
+            finally:
+                solution_base.SolutionBase._initialize_graph_interface = build
+            for _ in range(3 * repeats + 5):
+                tracker.process(image)
+            tracker.close()                   # the last profiles are written on closing
+            total, calls = collections.Counter(), collections.Counter()
+            for path in logs.glob("*.binarypb"):
+                profile = calculator_profile_pb2.GraphProfile.FromString(path.read_bytes())
+                for calculator in profile.calculator_profiles:
+                    total[calculator.name] += calculator.process_runtime.total
+                    calls[calculator.name] += sum(calculator.process_runtime.count)
+            whole = sum(total.values())
+            model = sum(t for k, t in total.items() if k.endswith("InferenceCalculator"))
+            print(f"  {name}: {100 * model / whole:4.1f} % of the time inside calculators in "
+                  f"the models' inference")
+            for calculator, t in total.most_common(4):
+                print(f"    {100 * t / whole:5.1f} %  {t / 1e3 / calls[calculator]:6.3f} ms a call"
+                      f"  {calculator.split('__')[-1]} ({calculator.split('__')[0]})")
+    finally:
+        os.sched_setaffinity(0, affinity)
+
+
 def bench_markerless(repeats: int, duration: float, folder: Path) -> None:
     import cv2
     from capture.camera.markerless import models_status
@@ -641,7 +696,8 @@ def main() -> int:
     parser.add_argument("--quick", action="store_true", help="shorter runs")
     parser.add_argument("--picture", default=None, metavar="PNG",
                         help="also draw what the trackers find (docs/img/capture_trackers.png)")
-    sections = ("osc", "hid", "camera", "replay", "trackers", "markerless", "parse", "store")
+    sections = ("osc", "hid", "camera", "replay", "trackers", "markerless", "graphs", "parse",
+                "store")
     parser.add_argument("--only", nargs="+", choices=sections, default=sections,
                         metavar="SECTION", help=f"run only these sections: {', '.join(sections)}")
     args = parser.parse_args()
@@ -656,6 +712,7 @@ def main() -> int:
                 "replay": lambda: bench_replay(duration, folder),
                 "trackers": lambda: bench_trackers(repeats),
                 "markerless": lambda: bench_markerless(repeats, duration, folder),
+                "graphs": lambda: bench_graphs(repeats, folder),
                 "parse": lambda: bench_hid_parse(repeats * 20),
                 "store": lambda: bench_store(duration, folder)}
         for name in sections:

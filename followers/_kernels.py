@@ -128,44 +128,49 @@ def _clear_rows(state, track, first, last):
 
 @inline
 def _mix_speeds(model, state, track, first, last):
-    """Rows first..last of a track: each speed level takes its neighbours' share (in place,
-    the level below's former value carried along)."""
-    alpha, change = state.alpha, model.speed_change
+    """Rows first..last of a track, each speed level given its neighbours' share, into
+    ``state.mixed`` rows A.. (A = the largest advance), with A zero rows on either side."""
+    alpha, change, mixed = state.alpha, model.speed_change, state.mixed
     M = alpha.shape[2]
+    A = model.advance.shape[0] - 1
+    n = last - first + 1
+    for i in range(A):
+        for m in range(M):
+            mixed[i, m] = 0.0
+            mixed[n + A + i, m] = 0.0
+    if M == 1:
+        for i in range(n):
+            mixed[A + i, 0] = alpha[track, first + i, 0]
+        return
     stay, up, down = change[0], change[1], change[2]
-    for r in range(first, last + 1):
-        row = alpha[track, r]
-        below = row[0]
-        row[0] = below * stay[0] + row[1] * down[0]
+    for i in range(n):
+        row = alpha[track, first + i]
+        out = mixed[A + i]
+        out[0] = row[0] * stay[0] + row[1] * down[0]
         for m in range(1, M - 1):
-            here = row[m]
-            row[m] = here * stay[m] + below * up[m] + row[m + 1] * down[m]
-            below = here
-        row[M - 1] = row[M - 1] * stay[M - 1] + below * up[M - 1]
+            out[m] = row[m] * stay[m] + row[m - 1] * up[m] + row[m + 1] * down[m]
+        out[M - 1] = row[M - 1] * stay[M - 1] + row[M - 2] * up[M - 1]
 
 
 @inline
-def _advance_row(alpha, track, r, first, last, by, keep_scale):
-    """Row r of a track := keep_scale * sum over a in [first, last] of row r - a times
-    ``by[a]`` (per level); returns its mass. Rows below r are read before r is written."""
-    target = alpha[track, r]
+def _advance_row(mixed, i, target, by, keep_scale):
+    """``target`` := keep_scale * sum over a of ``mixed`` row i - a times ``by[a]`` (per
+    level); returns its mass."""
     M = target.shape[0]
     total = 0.0
-    if first == 0 and last == 3:
+    if by.shape[0] == 4:
         # the common case (every advance of the speed model), in one pass over the levels
-        s0, s1, s2, s3 = alpha[track, r], alpha[track, r - 1], alpha[track, r - 2], \
-            alpha[track, r - 3]
+        s0, s1, s2, s3 = mixed[i], mixed[i - 1], mixed[i - 2], mixed[i - 3]
         b0, b1, b2, b3 = by[0], by[1], by[2], by[3]
         for m in range(M):
             v = (((s0[m] * b0[m] + s1[m] * b1[m]) + s2[m] * b2[m]) + s3[m] * b3[m]) * keep_scale
             target[m] = v
             total += v
         return total
-    acc = 0.0
     for m in range(M):
         acc = 0.0
-        for a in range(first, last + 1):
-            acc += alpha[track, r - a, m] * by[a, m]
+        for a in range(by.shape[0]):
+            acc += mixed[i - a, m] * by[a, m]
         acc *= keep_scale
         target[m] = acc
         total += acc
@@ -174,26 +179,19 @@ def _advance_row(alpha, track, r, first, last, by, keep_scale):
 
 @inline
 def _predict_track(model, state, track, off, T, lo, hi, keep_scale):
-    """Transition one track in place: truncated to states [lo, hi] of the template, speed
-    levels mixed, advanced; the mass times ``keep_scale`` (1 - restart). Returns the last
-    target state."""
-    alpha, rowsum, advance = state.alpha, state.rowsum, model.advance
-    A = advance.shape[0] - 1
-    if alpha.shape[2] > 1:
-        _mix_speeds(model, state, track, off + lo, off + hi)
+    """Transition one track: truncated to states [lo, hi] of the template, speed levels
+    mixed (``_mix_speeds``), advanced; the mass times ``keep_scale`` (1 - restart). Returns
+    the last target state."""
+    alpha, rowsum, mixed = state.alpha, state.rowsum, state.mixed
+    A = model.advance.shape[0] - 1
+    _mix_speeds(model, state, track, off + lo, off + hi)
     top = min(hi + A, T - 1)
-    # descending, so that every source row (<= target) is read before it is overwritten; each
-    # level's advances that it cannot make have probability 0
-    for j in range(top, lo - 1, -1):
-        r = off + j
-        if j == T - 1:
-            # absorbing end: every advance that would pass the last state lands on it
-            # (``advance_tail``), source row T - 1 - a for a in [T - 1 - hi, T - 1 - lo]
-            rowsum[track, r] = _advance_row(alpha, track, r, max(0, T - 1 - hi),
-                                            min(A, T - 1 - lo), model.advance_tail, keep_scale)
-        else:
-            rowsum[track, r] = _advance_row(alpha, track, r, max(0, j - hi), min(A, j - lo),
-                                            advance, keep_scale)
+    # target state j takes mixed row j - a (zero outside [lo, hi]) with ``advance[a]``; the
+    # absorbing end takes every advance that would pass it (``advance_tail``)
+    for j in range(lo, top + 1):
+        by = model.advance_tail if j == T - 1 else model.advance
+        rowsum[track, off + j] = _advance_row(mixed, j - lo + A, alpha[track, off + j], by,
+                                              keep_scale)
     return top
 
 
@@ -436,19 +434,28 @@ def _tops(state, k, off, dual, mixed):
 
 
 @inline
-def _lift_rows(state, k, off, shift):
-    """``state.lift[r]``: row r's emission (model 0) over ``exp(shift)`` where it holds mass,
-    else 0 (``shift`` at least the largest such emission); returns the mass it leaves,
-    sum_j predicted_j * lift_j."""
+def _lift_rows(state, k, off, tops, dual, mixed):
+    """``state.lift[r]``: row r's emission (model 0) over ``exp(tops[0])`` where it holds
+    mass, else 0 (``tops``: at least the largest emission of each model over those rows);
+    returns the mass each model leaves, sum_j predicted_j * exp(logb[e, j] - tops[e]) (e = 0,
+    1 when ``dual``, 2 when ``mixed``; 0 otherwise), in one pass."""
     rowsum, logb, support, lift = state.rowsum, state.logb, state.support, state.lift
-    c = 0.0
+    top0, top1, top2 = tops
+    c0 = 0.0
+    c1 = 0.0
+    c2 = 0.0
     for t in range(2):
         for r in range(off + support[k, t, 0], off + support[k, t, 1] + 1):
             v = rowsum[t, r]
-            e = exp_nonpositive(logb[0, r] - shift if v > 0.0 else -np.inf)
+            held = v > 0.0
+            e = exp_nonpositive(logb[0, r] - top0 if held else -np.inf)
             lift[r] = e
-            c += v * e
-    return c
+            c0 += v * e
+            if dual:
+                c1 += v * exp_nonpositive(logb[1, r] - top1 if held else -np.inf)
+                if mixed:
+                    c2 += v * exp_nonpositive(logb[2, r] - top2 if held else -np.inf)
+    return c0, c1, c2
 
 
 @inline
@@ -466,19 +473,6 @@ def _lift_rows_far(state, k, off, shift):
 
 
 @inline
-def _predicted_mass(state, e, k, off, top):
-    """sum_j predicted_j * exp(logb[e, j] - top) over both tracks' rows that hold mass
-    (``top`` at least their largest emission)."""
-    rowsum, logb, support = state.rowsum, state.logb, state.support
-    c = 0.0
-    for t in range(2):
-        for r in range(off + support[k, t, 0], off + support[k, t, 1] + 1):
-            v = rowsum[t, r]
-            c += v * exp_nonpositive(logb[e, r] - top if v > 0.0 else -np.inf)
-    return c
-
-
-@inline
 def _weigh(model, state, k):
     """Each row of both tracks times its emission (model 0) over the largest one, then both
     tracks divided by their total mass c; returns (c, the log of the scale), c = 0 when it is
@@ -486,7 +480,7 @@ def _weigh(model, state, k):
     recognition score (``frame_loglik[1, k]``): model 1's predictive likelihood, or its
     mixture with model 2's (weight ``mixture[0]``, whose log share goes to
     ``frame_loglik[2, k]``). One pass finds each model's largest emission, one takes the
-    exponentials (the rows with mass may all sit far below the best row: then
+    exponentials of all three (the rows with mass may all sit far below the best row: then
     ``_predictive_loglik`` and the best product of mass and emission)."""
     off, M, dual = model.offsets[k], state.alpha.shape[2], model.dual
     rowsum, logb, support, alpha, lift = (state.rowsum, state.logb, state.support,
@@ -495,10 +489,8 @@ def _weigh(model, state, k):
     mixed = dual and mixture > 0.0
     top0, top1, top2 = _tops(state, k, off, dual, mixed)
     shift = top0 if top0 > -np.inf else 0.0
-    c = _lift_rows(state, k, off, shift)
+    c, c1, c2 = _lift_rows(state, k, off, (shift, top1, top2), dual, mixed)
     if dual:
-        c1 = _predicted_mass(state, 1, k, off, top1)
-        c2 = _predicted_mass(state, 2, k, off, top2) if mixed else 0.0
         score = math.log(c1) + top1 if c1 > 1e-280 else _predictive_loglik(state, 1, k, off)
         if mixed:
             exact = math.log(c2) + top2 if c2 > 1e-280 else \

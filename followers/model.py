@@ -33,7 +33,9 @@ The layout of the state (see ``_kernels`` for the algorithm):
   outside what the templates span: a stuck or absurd sensor), left out like missing ones.
 - Scratch: ``xs, observed (D,)`` (the cleaned frame), ``residual (S,)`` (each
   state's capped sum of squared z-scores), ``lift (S,)`` (each state's emission over the
-  frame's largest), ``sub (4, S)`` (see ``_kernels._subframe_rows``).
+  frame's largest), ``sub (4, S)`` (see ``_kernels._subframe_rows``), ``mixed (T + 2A, M)``
+  (one track's rows with their speed levels mixed, ``_kernels._mix_speeds``; T the longest
+  template, A the largest advance).
 """
 from __future__ import annotations
 
@@ -95,6 +97,7 @@ class ForwardState(NamedTuple):
     residual: np.ndarray
     lift: np.ndarray
     sub: np.ndarray
+    mixed: np.ndarray
 
 
 class Forward(NamedTuple):
@@ -241,6 +244,7 @@ def forward_state(forward: Forward) -> ForwardState:
     model = forward.model
     K, S, D = model.lengths.shape[0], model.templates.shape[0], model.templates.shape[1]
     M = model.initial_speed.shape[0]
+    A = model.advance.shape[0] - 1
     state = ForwardState(
         alpha=np.zeros((2, S, M)), rowsum=np.zeros((2, S)), logb=np.zeros((3, S)),
         support=np.zeros((K, 2, 2), dtype=np.int64), moments=np.zeros((K, 2, 3)),
@@ -248,7 +252,8 @@ def forward_state(forward: Forward) -> ForwardState:
         frame_loglik=np.zeros((3, K)), scale2=np.ones((2, K)), scale_weight=np.zeros((2, K)),
         restart=np.tile(forward.restart, (K, 1)), subframe=np.zeros(K, dtype=np.bool_),
         mixture=np.zeros(1), outliers=np.zeros(1, dtype=np.int64), xs=np.zeros(D),
-        observed=np.zeros(D), residual=np.zeros(S), lift=np.zeros(S), sub=np.zeros((4, S)))
+        observed=np.zeros(D), residual=np.zeros(S), lift=np.zeros(S), sub=np.zeros((4, S)),
+        mixed=np.zeros((int(model.lengths.max()) + 2 * A, M)))
     reset_forward(forward, state)
     return state
 

@@ -205,7 +205,7 @@ def shadow_pixels(segmentation: LitSegmentation) -> tuple[np.ndarray, np.ndarray
     shadow: the field's colour direction (chromaticity), darker by a factor in
     [SHADOW_DARKEST, 1), and smooth (no texture beyond the background's noise). shadows: the
     foreground pixels among them, without thin dark lines (pencil strokes): a shadow is as
-    wide as several of them."""
+    wide as several of them, or joined to such a wide shadow and to the lit background."""
     cv2 = require_cv2()
     # JPEG keeps colour at a quarter of the resolution: judge the hue on a smoother copy
     picture = cv2.GaussianBlur(segmentation.smoothed, (0, 0), 1.5)
@@ -222,9 +222,25 @@ def shadow_pixels(segmentation: LitSegmentation) -> tuple[np.ndarray, np.ndarray
     shaded = candidate & (texture <= SHADOW_TEXTURE * max(segmentation.field.noise, 1.0))
     size = max(3, round(0.015 * min(shaded.shape)))
     kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (size, size))
-    shadows = cv2.morphologyEx((shaded & segmentation.foreground).astype(np.uint8),
-                               cv2.MORPH_OPEN, kernel) > 0
-    return shadows, shaded
+    region = shaded & segmentation.foreground
+    wide = cv2.morphologyEx(region.astype(np.uint8), cv2.MORPH_OPEN, kernel) > 0
+    return wide | _thin_ends(wide, region, segmentation.foreground), shaded
+
+
+def _thin_ends(wide: np.ndarray, region: np.ndarray, foreground: np.ndarray) -> np.ndarray:
+    """(H, W) bool: the parts of `region` (shaded and standing out) that the opening cut off
+    a wide shadow: its thin ends, such as the tip of a pocket between two limbs. A part joined
+    to a wide shadow is shadow if it also touches the lit background (a shadow's soft edge
+    fades into it), which a darker, greyer part inside the character never does."""
+    cv2 = require_cv2()
+    if not wide.any():
+        return wide
+    count, labels = cv2.connectedComponents(region.astype(np.uint8), connectivity=8)
+    lit = cv2.dilate((~foreground).astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
+    keep = (np.bincount(labels[wide], minlength=count) > 0) & \
+        (np.bincount(labels[lit & region], minlength=count) > 0)
+    keep[0] = False
+    return keep[labels] & ~wide
 
 
 def refine_edge(rgb: np.ndarray, background: np.ndarray, mask: np.ndarray, *,

@@ -436,7 +436,8 @@ class _Contrast:
     threshold [0..255]; background (H, W, 3) float32; colour (3,) its mean; shadows (H, W)
     bool, the background in the character's shadow (sure background); weak (H, W) bool | None,
     what stands out a little and does not look like shadow (the character's where joined to
-    it; None for the plain key)."""
+    it; None for the plain key); smoothed (H, W, 3) float32 | None, the picture lightly
+    smoothed as the light field's residual was measured (None for the plain key)."""
 
     foreground: np.ndarray
     sharp: np.ndarray
@@ -445,6 +446,7 @@ class _Contrast:
     colour: np.ndarray
     shadows: np.ndarray
     weak: np.ndarray | None = None
+    smoothed: np.ndarray | None = None
 
 
 def _alpha_cutout(image, max_hole_fraction, min_character_fraction) -> Cutout:
@@ -510,7 +512,8 @@ def _field_contrast(rgb, tolerance) -> _Contrast:
                      background=segmentation.background,
                      colour=np.array(require_cv2().mean(segmentation.background)[:3]),
                      shadows=shadows,
-                     weak=light.weak_foreground(segmentation) & ~shaded & ~shadows)
+                     weak=light.weak_foreground(segmentation) & ~shaded & ~shadows,
+                     smoothed=segmentation.smoothed)
 
 
 def _find_character(rgb, kind, *, plain, tolerance, close_gaps, max_hole_fraction,
@@ -536,7 +539,9 @@ def _find_character(rgb, kind, *, plain, tolerance, close_gaps, max_hole_fractio
     # a part coloured almost like the backdrop, joined to what stands out, is the character's
     main = light.grow_into(main, contrast.weak)
     first = fill_holes(main, max_hole_fraction, contrast.sharp, 0.5 * contrast.threshold)
-    refined = light.refine_edge(rgb, contrast.background, first,
+    # GrabCut's colour models see the picture with its noise smoothed, as the residual was
+    # measured: a part a few levels off the backdrop is lost in single pixels' noise
+    refined = light.refine_edge(contrast.smoothed, contrast.background, first,
                                 sure_background=contrast.shadows)
     refined = largest_component(light.settle_edge(rgb, contrast.background,
                                                   largest_component(refined)))

@@ -8,11 +8,11 @@ fit called background, one degree higher. A pixel is foreground when its colour 
 the field by more than a threshold set by the background's own noise; pixels joined to those
 that differ by less, down to a weak threshold just above the noise, join them (hysteresis: a
 character's part coloured like the backdrop still stands out from its smooth light, if only
-a little, and is kept when it touches the rest). The edge of a solid
-character is then refined with OpenCV's GrabCut, seeded from that first mask, on the picture
-with the light divided out (so the background becomes flat for its colour models); a soft
-shadow the character casts on the background (the field's own colour, only darker, and as
-smooth as the background) stays background.
+a little, and is kept when it touches the rest). The edge of a solid character is then
+refined with OpenCV's GrabCut, seeded from that first mask, on the picture smoothed as for the
+residual and with the light divided out (so the background becomes flat and tight for its
+colour models); a soft shadow the character casts on the background (the field's own colour,
+only darker, and as smooth as the background) stays background.
 
 Conventions: images (H, W, 3) float32 or uint8 RGB on the 0..255 scale, rows top to bottom;
 colour distances are Euclidean in RGB.
@@ -248,11 +248,12 @@ def refine_edge(rgb: np.ndarray, background: np.ndarray, mask: np.ndarray, *,
                 iterations: int = GRABCUT_ITERATIONS) -> np.ndarray:
     """GrabCut seeded from a first mask: (H, W) bool.
 
-    rgb : (H, W, 3) uint8; background : (H, W, 3) float32, the light field, divided out so
-    the background's colour model is tight; mask : (H, W) bool, the first mask. Pixels more
-    than `band` px inside the first mask are sure foreground, more than `band` px outside
-    sure background, and so is `sure_background` (H, W) bool (shadows); GrabCut decides the
-    band between, on the bounding box of the band."""
+    rgb : (H, W, 3) uint8 or float32 [0..255], the picture or a smoothed copy of it;
+    background : (H, W, 3) float32, the light field, divided out so the background's colour
+    model is tight; mask : (H, W) bool, the first mask. Pixels more than `band` px inside the
+    first mask are sure foreground, more than `band` px outside sure background, and so is
+    `sure_background` (H, W) bool (shadows); GrabCut decides the band between, on the
+    bounding box of the band."""
     cv2 = require_cv2()
     mean = np.array(cv2.mean(background)[:3], np.float32)
     flat = rgb.astype(np.float32) / np.maximum(background, 1.0) * mean

@@ -262,8 +262,9 @@ def bench_photo(repeats: int) -> None:
 def bench_accuracy(seeds: range) -> None:
     """Cut-out and automatic-pin accuracy on the pictures the tests build, over several seeds:
     photographs cut to silhouettes over backdrops lit 25-50 % unevenly (noise, JPEG 65-80),
-    pen outlines on paper (vignette, noise, JPEG), stars, stick figures and the horse. Both the
-    photographs and outline shapes used for tuning and those held out are reported."""
+    pen outlines on paper (vignette, noise, JPEG), a creature casting a soft shadow on its
+    backdrop, stars, stick figures and the horse. Both the photographs and outline shapes used
+    for tuning and those held out are reported."""
     import time
 
     from characters.image.background import remove_background
@@ -306,6 +307,18 @@ def bench_accuracy(seeds: range) -> None:
                   f"min {values.min():.4f}  >= {target}: {(values >= target).sum()} of "
                   f"{len(values)}")
     print(f"  drawings: details inside the puppet {details_inside[0]} of {details_inside[1]}")
+    for group, names in (("tuning", kit.TUNING_PHOTOS), ("held out", ("coffee",))):
+        taken, met = [], 0
+        for name in names:
+            for seed in seeds:
+                picture, truth, shadow = kit.shadow_case(np.random.default_rng(seed),
+                                                         photos[name])
+                mask = remove_background(picture).mask
+                taken.append((mask & shadow).sum() / shadow.sum())
+                met += kit.iou(mask, truth) >= 0.95 and taken[-1] <= 0.02
+        print(f"  shadows  {group:8s} n={len(taken):3d}  shadow taken mean "
+              f"{100 * np.mean(taken):.2f} %  max {100 * np.max(taken):.2f} %  IoU >= 0.95 "
+              f"and <= 2 % taken: {met} of {len(taken)}")
     other = []
     for name in kit.OTHER_PHOTOS:
         photo = kit.photo(name)

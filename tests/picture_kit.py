@@ -154,6 +154,22 @@ def photo_on_background(rng, picture: np.ndarray, mask: np.ndarray, *, colour, g
     return composite if quality is None else jpeg(composite, quality)
 
 
+
+def shadow_case(rng, picture: np.ndarray, *, colour=(200, 190, 120)):
+    """A photograph cut to a creature over a backdrop lit 30 % unevenly, casting a soft shadow
+    40 % dark on it, JPEG at 75. Returns (picture (H, W, 3) uint8, truth (H, W) bool, shadow
+    (H, W) bool: the backdrop darkened by at least 20 % by the shadow, away from the
+    character (3 px out), which the cut-out must leave out)."""
+    cv2 = _cv2()
+    height, width = picture.shape[:2]
+    truth = creature(rng, height, width)
+    composite = photo_on_background(rng, picture, truth, colour=colour, gradient=0.3,
+                                    shadow=0.4, quality=75)
+    shaded = photo_on_background(rng, np.zeros_like(picture), truth, colour=(100, 100, 100),
+                                 gradient=0.0, noise=0.0, shadow=0.4, quality=None)
+    near = cv2.dilate(truth.astype(np.uint8), np.ones((7, 7), np.uint8)).astype(bool)
+    return composite, truth, (shaded[:, :, 0] < 80) & ~near
+
 # --- pen drawings on paper ----------------------------------------------------------------------
 
 INKS = {"black": (25, 25, 30), "blue": (30, 50, 160), "red": (180, 30, 40),

@@ -64,16 +64,8 @@ def test_a_part_coloured_almost_like_the_backdrop_stays_with_the_character(rng):
 
 @pytest.mark.realdata
 def test_shadow_on_the_background_stays_background(rng):
-    photo = kit.photo("coffee")
-    height, width = photo.shape[:2]
-    truth = kit.creature(rng, height, width)
-    picture = kit.photo_on_background(rng, photo, truth, colour=(200, 190, 120), gradient=0.3,
-                                      shadow=0.4, quality=75)
-    shaded = kit.photo_on_background(rng, np.zeros_like(photo), truth, colour=(100, 100, 100),
-                                     gradient=0.0, noise=0.0, shadow=0.4, quality=None)
     # the shadow: background darkened by at least 20 %, away from the character
-    shadow = (shaded[:, :, 0] < 80) & ~cv2.dilate(truth.astype(np.uint8),
-                                                   np.ones((7, 7), np.uint8)).astype(bool)
+    picture, truth, shadow = kit.shadow_case(rng, kit.photo("coffee"))
     assert shadow.sum() > 2000
     cutout = remove_background(picture)
     assert kit.iou(cutout.mask, truth) >= 0.95

@@ -10,6 +10,7 @@ from characters.image.arap import R90, ArapDeformer
 from characters.image.background import load_image, remove_background
 from characters.image.bake import key_times
 from characters.image.mesh import even_odd_inside, signed_areas
+from characters.integrators import Verlet
 
 cv2 = pytest.importorskip("cv2")
 
@@ -269,6 +270,28 @@ def test_rubber_pull_by_30_percent_inverts_nothing(momo_path, direction):
     assert np.allclose(shapes[-1][puppet.pins["head"].index], goal)
     assert puppet.inverted_triangles().size == 0
 
+
+
+def test_the_compiled_frame_steps_as_the_substep_loop(momo_path):
+    """One compiled call per frame against the integrator's Python substep loop, on the same
+    pins: a head pushed down into the anchored feet (the no-fold guard at work), held, then
+    let go: the same states, bit for bit, and the same guard count."""
+    compiled, looped = (_pinned(momo_path, material="rubber") for _ in range(2))
+    assert compiled._integrator._frame is not None
+    looped._integrator = Verlet(substeps=1)      # the base class's loop
+    head = compiled.vertices[compiled.pins["head"].index]
+    folded = 0
+    for k in range(40):
+        targets = ({"head": head + (25.0 * np.sin(0.5 * k), 9.0 * min(k, 20))} if k < 30
+                   else {})
+        compiled.step(1 / 25, targets)
+        looped.step(1 / 25, targets)
+        np.testing.assert_array_equal(compiled.state.x, looped.state.x)
+        np.testing.assert_array_equal(compiled.state.v, looped.state.v)
+        assert compiled._no_fold.last_below == looped._no_fold.last_below
+        folded = max(folded, compiled._no_fold.last_below)
+    assert folded > 10                              # the guard had triangles to push apart
+    assert np.abs(compiled.surface() - compiled.vertices).max() > 10.0
 
 def test_pulled_pin_drags_neighbours_more_than_far_side(momo_path):
     puppet = ImagePuppet.from_image(momo_path)       # no anchors: only inertia holds it back

@@ -53,6 +53,7 @@ from ..model import MassSpring
 from .arap import ArapDeformer
 from .background import load_image, remove_background, require_cv2, shrink_any
 from .bake import BakedMotion, bake_motion
+from .frame import FrameArrays, run_substeps
 from .guard import NoFoldConstraint
 from .mesh import GridMesh, build_grid_mesh, signed_areas
 from .skeleton import ProposedPin, propose_pins
@@ -182,7 +183,7 @@ class ImagePuppet:
         omega_max = math.sqrt(2.0 * stiffness * incident)
         limit = min(2.0 / omega_max, 2.0 / max(2.0 * damping * incident, 1e-12))
         self.max_substep = 0.5 * limit   # [s], half the stability limit
-        self._integrator = Verlet(substeps=1)
+        self._integrator = FrameVerlet(self.model, self._no_fold)
         self._arap: ArapDeformer | None = None
         self._neighbour_lists = None
         self._handle_cache = None
@@ -504,3 +505,27 @@ class ImagePuppet:
         """(K,) int: triangles whose signed area is <= 0 at positions (default: now)."""
         x = self.state.x if positions is None else positions
         return np.flatnonzero(signed_areas(x, self.triangles) <= 0.0)
+
+
+class FrameVerlet(Verlet):
+    """Verlet stepping an image puppet: with pins only (no target pulls or external forces)
+    all substeps of a step run in one compiled call (`frame.run_substeps`: the same kernels in
+    the same order as the base class's loop, Python's lock released); the checks, rollback and
+    retries stay the base class's, once per step."""
+
+    def __init__(self, model: MassSpring, guard: NoFoldConstraint, **options):
+        super().__init__(**options)
+        self._model = model
+        self._guard = guard
+        compiled = model.dim == 2 and list(model.constraints) == [guard]
+        self._frame = FrameArrays.of(model, guard) if compiled else None
+
+    def _run(self, model, state, dt, control, substeps, scratch) -> int:
+        if (self._frame is None or model is not self._model or control.target_index.size
+                or control.force_index.size):
+            return super()._run(model, state, dt, control, substeps, scratch)
+        h = dt / substeps
+        self._guard.last_below = int(run_substeps(
+            self._frame, state.x, state.v, scratch.x0, control.pin_index, control.pin_position,
+            substeps, h, math.exp(-model.velocity_damping * h)))
+        return 0

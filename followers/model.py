@@ -133,13 +133,25 @@ def _adaptation(setting) -> tuple[np.ndarray, float]:
     return np.array([np.exp(-1.0 / memory), lowest ** 2, highest ** 2]), prior
 
 
-def _emission_tables(sigmas: np.ndarray, rec: np.ndarray | None):
-    """weights = 1 / sigma**2 and log_norm = 0.5 log(weights / 2 pi) per emission model, in
-    place (each temporary of this size would be fresh memory to fault in)."""
+def _emission_tables(sigmas: list[np.ndarray], rec: list[np.ndarray] | None, factor: int,
+                     S: int):
+    """(weights, log_norm, log_norm_sum) of each emission model (``sigmas``; ``rec`` when
+    given): weights = 1 / sigma**2 and log_norm = 0.5 log(weights / 2 pi), from the K
+    templates' (T_k, D) sigmas upsampled by ``factor`` (``upsample``) to S rows in all,
+    each written in place (every temporary of this size would be fresh memory to fault in)."""
     models = (sigmas,) if rec is None else (sigmas, rec)
-    weights = np.empty((len(models),) + sigmas.shape)
-    for row, sigma in enumerate(models):
-        np.square(sigma, out=weights[row])
+    weights = np.empty((len(models), S, sigmas[0].shape[1]))
+    for row, model in enumerate(models):
+        if factor == 1:
+            np.concatenate(model, axis=0, out=weights[row])
+            continue
+        first = 0
+        for sigma in model:
+            last = first + factor * (sigma.shape[0] - 1) + 1
+            upsample_into(np.ascontiguousarray(sigma, dtype=np.float64), factor,
+                          weights[row, first:last])
+            first = last
+    np.square(weights, out=weights)
     np.reciprocal(weights, out=weights)
     log_norm = np.log(weights)
     log_norm -= math.log(2.0 * math.pi)
@@ -207,11 +219,9 @@ def build_forward(templates: list[np.ndarray], sigmas: list[np.ndarray], windows
     """
     R = transitions.resolution
     if R > 1:
-        # R states per template frame: the template and its sigmas, linearly interpolated
+        # R states per template frame: the template and its sigmas (``_emission_tables``),
+        # linearly interpolated
         templates = [upsample(t, R) for t in templates]
-        sigmas = [upsample(s, R) for s in sigmas]
-        if recognition is not None:
-            recognition = [upsample(s, R) for s in recognition]
         windows = np.asarray(windows) * R
     K, D = len(templates), int(templates[0].shape[1])
     if exact is not None and recognition is None:
@@ -222,9 +232,8 @@ def build_forward(templates: list[np.ndarray], sigmas: list[np.ndarray], windows
     # one template is taken as it is (R > 1: the upsampled copy); set-up time is mostly the
     # first touch of fresh memory (page faults), so no array is copied that need not be
     stacked = _stacked(templates, owned=R > 1)
-    sigma = _stacked(sigmas, owned=R > 1)
-    rec = None if recognition is None else _stacked(recognition, owned=R > 1)
-    weights, log_norm, log_norm_sum = _emission_tables(sigma, rec)
+    weights, log_norm, log_norm_sum = _emission_tables(sigmas, recognition, R,
+                                                       stacked.shape[0])
     scales = _exact_scales(exact, K, D)
     lower, upper = span_bounds(stacked, outlier_span)
     adapt, prior = _adaptation(adaptation)
@@ -234,7 +243,7 @@ def build_forward(templates: list[np.ndarray], sigmas: list[np.ndarray], windows
         log_norm, log_norm_sum, np.ascontiguousarray(1.0 / scales ** 2),
         np.ascontiguousarray(np.log(scales)), lower, upper,
         *_transition_tables(transitions), np.stack([adapt, report]), float(cap), float(prune),
-        float(tilt), rec is not None)
+        float(tilt), recognition is not None)
     return Forward(model, R, (transitions.restart_anywhere, transitions.restart),
                    np.array([prior, report_prior]))
 
@@ -254,7 +263,7 @@ def forward_state(forward: Forward) -> ForwardState:
         mixture=np.zeros(1), outliers=np.zeros(1, dtype=np.int64), xs=np.zeros(D),
         observed=np.zeros(D), residual=np.zeros(S), lift=np.zeros(S), sub=np.zeros((4, S)),
         mixed=np.zeros((int(model.lengths.max()) + 2 * A, M)))
-    reset_forward(forward, state)
+    _reset_tracks(forward, state)  # alpha and rowsum are fresh zeros
     return state
 
 
@@ -263,6 +272,11 @@ def reset_forward(forward: Forward, state: ForwardState) -> None:
     ``restart``, ``subframe`` and ``mixture``, are left as they are)."""
     state.alpha[:] = 0.0
     state.rowsum[:] = 0.0
+    _reset_tracks(forward, state)
+
+
+def _reset_tracks(forward: Forward, state: ForwardState) -> None:
+    """``reset_forward`` but for alpha and rowsum."""
     state.support[:, :, 0] = 1
     state.support[:, :, 1] = 0
     state.moments[:] = 0.0

@@ -183,7 +183,7 @@ def test_a_face_far_from_the_camera_is_found_in_a_window_and_measured(tmp_path, 
     empty = np.full((H, W, 3), (90, 100, 110), np.uint8)
     frames = [place(photo, m) for m in matrices[:3]] + [empty] * 3 + [
         place(photo, m) for m in matrices[3:]]
-    values = track(tmp_path, frames)
+    values = track(tmp_path, frames, search_every=1)         # the far search on every frame
     assert np.isfinite(values[:3]).all() and np.isnan(values[3:6]).all()
     small = values[6:]
     assert np.isfinite(small).all()
@@ -200,6 +200,10 @@ def test_a_face_far_from_the_camera_is_found_in_a_window_and_measured(tmp_path, 
     assert np.abs(small[:, FACE["head_roll"]] - values[:3, FACE["head_roll"]].mean()).max() < 4
     # without the far search the small face is not found at all
     assert np.isnan(track(tmp_path, frames, far=False)[6:]).all()
+    # by default the far search runs on the frame after the face is lost, then on one frame in
+    # three: a far face coming into view between two searches is found two frames later
+    late = track(tmp_path, frames[:6] + [empty] + frames[6:])
+    assert np.isnan(late[3:9]).all() and np.isfinite(late[9:]).all()
 
 
 def test_pose_lean_follows_a_rotated_body_and_no_hand_is_nan(tmp_path, photo):

@@ -213,6 +213,12 @@ def _searching_hands(solutions):
     return SearchingHands
 
 
+def _frames(search_every) -> int:
+    if not isinstance(search_every, int) or not 1 <= search_every <= 30:
+        raise ValueError(f"search_every is a number of frames, 1 to 30, got {search_every!r}")
+    return search_every
+
+
 class MediapipeTracker(Tracker):
     """Base of the markerless trackers: RGB conversion into a reused buffer, one MediaPipe
     solution in video mode, `seen` (True when the last frame had a target), `close()`."""
@@ -300,8 +306,10 @@ class FaceMeshTracker(MediapipeTracker):
         of the image: a performer far from the camera, a wide shot). When the mesh finds no
         face, MediaPipe's full-range face detector searches the frame; a face it finds is
         found again in a window around it, enlarged, on every frame (the window follows the
-        face; the face may move a face's width a frame). Costs one full-range detection per
-        frame while no face is in view.
+        face; the face may move a face's width a frame).
+    search_every : while no face is found, the full-range detector searches one frame in this
+        many (default 3), and the frame after a face is lost; 1: every frame. A far face coming
+        into view is found up to `search_every - 1` frames later.
     min_detection, min_tracking : MediaPipe's confidences for finding a face and for keeping it.
     """
     name = "face"
@@ -312,11 +320,14 @@ class FaceMeshTracker(MediapipeTracker):
     # a face wider than FAR_LIMIT of the image goes back to the whole frame
     FAR_WINDOW, WINDOW_PX, FAR_LIMIT = 3.0, 256, 0.2
 
-    def __init__(self, *, refine: bool = True, far: bool = True, min_detection: float = 0.5,
-                 min_tracking: float = 0.5):
+    def __init__(self, *, refine: bool = True, far: bool = True, search_every: int = 3,
+                 min_detection: float = 0.5, min_tracking: float = 0.5):
         super().__init__(min_detection=min_detection, min_tracking=min_tracking)
         self.refine = bool(refine)
         self.far = bool(far)
+        self.search_every = _frames(search_every)
+        self._search_wait = 0                # frames until the far search runs again
+        self.searched = False                # the far search ran on the last frame
         _, solutions = _mediapipe()
         with native_notices():
             self._solution = self._mesh(solutions)
@@ -343,7 +354,8 @@ class FaceMeshTracker(MediapipeTracker):
             min_tracking_confidence=self.min_tracking)
 
     def describe(self) -> dict:
-        return {**super().describe(), "refine": self.refine, "far": self.far}
+        return {**super().describe(), "refine": self.refine, "far": self.far,
+                "search_every": self.search_every}
 
     def last_points(self) -> np.ndarray | None:
         """(N, 3) float [px] all the last frame's face landmarks, None if no face."""
@@ -355,6 +367,8 @@ class FaceMeshTracker(MediapipeTracker):
     def _search_far(self, rgb: np.ndarray) -> None:
         """The full-range detector on the whole frame: a window around the best face."""
         height, width = rgb.shape[:2]
+        self.searched = True
+        self._search_wait = self.search_every - 1
         detections = self._detector.process(rgb).detections
         if not detections:
             return
@@ -396,12 +410,13 @@ class FaceMeshTracker(MediapipeTracker):
         height, width = rgb.shape[:2]
         out = np.full(len(self.channels), np.nan)
         landmarks = None
+        self.searched = False
         if self._window is None:
             faces, = self._run(rgb, "multi_face_landmarks")
             if faces:
                 landmarks = faces[0].landmark
                 self._frame = (0.0, 0.0, float(width), float(height))
-            elif self.far:
+            elif self.far and self._search_wait <= 0:
                 self._search_far(rgb)
         self.found_far = False
         if landmarks is None and self._window is not None:
@@ -416,7 +431,10 @@ class FaceMeshTracker(MediapipeTracker):
                 self._restart()            # back to the whole frame: search it afresh
         self.seen = landmarks is not None
         if not self.seen:
+            if not self.searched:
+                self._search_wait -= 1
             return out
+        self._search_wait = 0                  # lost after this frame: search the next one
         self._landmarks = landmarks
         x0, y0, sx, sy = self._frame
         points = self._points
@@ -427,7 +445,7 @@ class FaceMeshTracker(MediapipeTracker):
 
     def reset(self) -> None:
         super().reset()
-        self._window = None
+        self._window, self._search_wait, self.searched = None, 0, False
 
     def close(self) -> None:
         super().close()
@@ -470,11 +488,8 @@ class HandsTracker(MediapipeTracker):
             raise ValueError(f"model must be 'full' or 'lite', got {model!r}")
         if max_hands not in (1, 2):
             raise ValueError(f"max_hands must be 1 or 2, got {max_hands!r}")
-        if not isinstance(search_every, int) or not 1 <= search_every <= 30:
-            raise ValueError(f"search_every is a number of frames, 1 to 30, "
-                             f"got {search_every!r}")
         self.max_hands = int(max_hands)
-        self.search_every = search_every
+        self.search_every = _frames(search_every)
         self.hand = hand
         self.other = "left" if hand == "right" else "right"
         self.model = model

@@ -552,12 +552,9 @@ class ProjectiveDynamics(Integrator):
     def _advance(self, model, state, h, control, pin_goal) -> int:
         fac = self._factor_for(model, h, control)
         x, v = state.x, state.v
-        fac.x_start[...] = x
-        fac.v_start[...] = v
-        known = fac.known_positions
-        known[...] = x  # fixed nodes stay where they are
-        if control.pin_index.size:
-            known[control.pin_index] = pin_goal
+        known = fac.known_positions   # x, fixed nodes staying where they are, pins at the goal
+        kernels.pd_step_start(x, v, fac.x_start, fac.v_start, known, control.pin_index,
+                              control.pin_position if pin_goal is None else pin_goal)
         accel = fac.accel
         accel[...] = model.gravity
         if control.force_index.size:
@@ -573,18 +570,15 @@ class ProjectiveDynamics(Integrator):
             kernels.pd_base_rhs(fac.x_start, fac.v_start, known, model.springs, model.stiffness,
                                 model.damping, model.mass, accel, fac.free_nodes, fac.free_id,
                                 h, model.velocity_damping, fac.base)
-        if control.target_index.size:
-            t = control.target_index
-            fac.base[t] += (h * h * control.target_stiffness[:, None] * control.target_position
-                            + h * control.target_damping[:, None] * fac.x_start[t])
-        # warm start: carry the shape along with its velocity, x + h v. Not the usual inertial
-        # prediction y = x + h v + h^2 a: when h^2 g exceeds an element's size, y drops free
-        # nodes through their fixed neighbours and the local steps settle on inverted springs
-        x += h * v
-        x[fac.known_index] = known[fac.known_index]
+        # targets; warm start: carry the shape along with its velocity, x + h v. Not the usual
+        # inertial prediction y = x + h v + h^2 a: when h^2 g exceeds an element's size, y drops
+        # free nodes through their fixed neighbours and the local steps settle on inverted
+        # springs
         chebyshev = self.chebyshev_rho is not None
-        if chebyshev:
-            fac.previous[...] = x
+        kernels.pd_warm_start(x, v, h, fac.base, fac.x_start, control.target_index,
+                              control.target_position, control.target_stiffness,
+                              control.target_damping, fac.known_index, known,
+                              fac.previous if chebyshev else fac.previous[:0])
         direct = x.flags.c_contiguous and not chebyshev
         rho2 = self.chebyshev_rho ** 2 if chebyshev else 0.0
         omega = 1.0
@@ -616,8 +610,7 @@ class ProjectiveDynamics(Integrator):
                          else 4.0 / (4.0 - rho2 * omega))
                 kernels.chebyshev_update(x, fac.solved, fac.previous, omega,
                                          self.chebyshev_gamma)
-        np.subtract(x, fac.x_start, out=v)
-        v /= h
+        kernels.pd_step_end(x, fac.x_start, h, v)
         return iterations
 
     def iterations_for(self, h: float) -> int:

@@ -753,6 +753,53 @@ def spring_energy_3d(x, si, sj, rest, k, scratch):
     return total
 
 
+
+# --- a projective-dynamics step's start and end (exact: numpy's arithmetic, no fastmath) ----
+
+@njit(cache=True, nogil=True)
+def pd_step_start(x, v, x_start, v_start, known, pin_index, pin_goal):
+    """x_start, v_start := x, v; known := x with the pinned rows at pin_goal (P, d)."""
+    n, d = x.shape
+    for i in range(n):
+        for a in range(d):
+            x_start[i, a] = x[i, a]
+            v_start[i, a] = v[i, a]
+            known[i, a] = x[i, a]
+    for p in range(pin_index.shape[0]):
+        for a in range(d):
+            known[pin_index[p], a] = pin_goal[p, a]
+
+
+@njit(cache=True, nogil=True)
+def pd_warm_start(x, v, h, base, x_start, target_index, target_position, target_stiffness,
+                  target_damping, known_index, known, previous):
+    """The targets' share of the fixed right-hand side, base[t] += h^2 k_t p_t + h c_t x0_t
+    (target indices distinct), then the first iterate x += h v with known rows at known, and
+    previous := x (previous of shape (0, d): not kept)."""
+    d = x.shape[1]
+    hh = h * h
+    for t in range(target_index.shape[0]):
+        i = target_index[t]
+        stiffness = hh * target_stiffness[t]
+        damping = h * target_damping[t]
+        for a in range(d):
+            base[i, a] += stiffness * target_position[t, a] + damping * x_start[i, a]
+    for i in range(x.shape[0]):
+        for a in range(d):
+            x[i, a] += h * v[i, a]
+    _set_known_rows(known_index, known, x)
+    if previous.shape[0]:
+        previous[...] = x
+
+
+@njit(cache=True, nogil=True)
+def pd_step_end(x, x_start, h, v):
+    """v := (x - x_start) / h."""
+    n, d = x.shape
+    for i in range(n):
+        for a in range(d):
+            v[i, a] = (x[i, a] - x_start[i, a]) / h
+
 @njit(**_JIT)
 def chebyshev_update(current, solved, previous, omega, gamma):
     """Chebyshev semi-iterative step (Wang 2015), in place:

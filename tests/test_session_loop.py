@@ -609,3 +609,47 @@ def test_the_report_splits_the_simulate_stage_by_character():
     table = report.format().splitlines()
     row = table.index(next(line for line in table if line.startswith("  simulate")))
     assert table[row + 1].split()[0] == "c"
+
+
+class DigestRenderer:
+    """Draws the sha1 of the surface it is handed as seven opaque pixels: a picture that says
+    exactly which vertices were drawn (in a thread or a process)."""
+
+    def render(self, puppet):
+        import hashlib
+        digest = hashlib.sha1(np.ascontiguousarray(puppet.surface()).tobytes()).digest()
+        rgb = np.frombuffer(digest + b"\0", np.uint8).reshape(7, 3)
+        return np.concatenate([rgb, np.full((7, 1), 255, np.uint8)], axis=1)[None]
+
+
+@pytest.mark.parametrize("kind", ["thread", "process"])
+def test_a_latex_puppet_is_drawn_from_its_surface_nodes_as_from_its_surface(kind):
+    """The worker copies a latex puppet's surface nodes, not its visual mesh, and draws the
+    mesh from them: every picture equals the one drawn from the puppet's own surface()."""
+    from characters import LatexPuppet
+    from mop.session.loop import CharacterRuntime
+    from mop.session.worker import RenderProcess, RenderWorker, snapshot_parts
+    puppet = LatexPuppet.froggy(masses=400)
+    take, skin = snapshot_parts(puppet)
+    assert skin is puppet.skin and take().shape[0] < puppet.surface().shape[0] / 5
+    character = CharacterRuntime("frog", puppet, DigestRenderer())
+    recorder = Recorder()
+    worker = (RenderWorker if kind == "thread" else RenderProcess)(
+        Stage((16, 16), (0, 0, 0)), [character], [recorder], lossless=True)
+    reference, expected = Stage((16, 16), (0, 0, 0)), []
+    worker.start()
+    try:
+        worker.wait_ready()
+        for index in range(5):
+            puppet.step(0.04, {"thumb": index / 4, "pinky": 1.0 - index / 4})
+            worker.submit(index, {"frame": index})
+            reference.clear()
+            reference.place(DigestRenderer().render(puppet), (0.5, 0.5))
+            expected.append(reference.frame.copy())
+    finally:
+        worker.finish(5)
+    assert [(index, repeat) for index, repeat, _ in recorder.written] == [
+        (k, False) for k in range(5)]
+    for (_, _, frame), wanted in zip(recorder.written, expected):
+        np.testing.assert_array_equal(frame, wanted)
+    assert not np.array_equal(expected[0], expected[-1])

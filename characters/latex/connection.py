@@ -197,6 +197,25 @@ class ConnectionMap:
                           shape=(len(self.indptr) - 1, self.node_count))
 
 
+
+class Skin:
+    """The visual mesh from the surface nodes, picklable (a render process can draw a puppet
+    from its n surface nodes instead of its V visual vertices): `skin(nodes, out)` writes
+    out (V, 3) = rest + W (nodes - node_rest) for nodes (n, 3) [m] and returns it."""
+
+    def __init__(self, connection: ConnectionMap, rest_visual: np.ndarray,
+                 node_rest: np.ndarray):
+        self.indptr, self.indices = connection.indptr, connection.indices
+        self.weights = connection.weights
+        self.rest_visual = np.ascontiguousarray(rest_visual, dtype=np.float64)
+        self.node_rest = np.ascontiguousarray(node_rest, dtype=np.float64)
+        self.shape = self.rest_visual.shape
+
+    def __call__(self, nodes: np.ndarray, out: np.ndarray) -> np.ndarray:
+        apply_connection(self.indptr, self.indices, self.weights, self.rest_visual,
+                         self.node_rest, nodes, out)
+        return out
+
 WEIGHTINGS = ("distance", "barycentric")
 
 

@@ -135,7 +135,8 @@ class LatexPuppet:
     surface_visual_index : (n_s,) int64 visual vertex of each surface node
     faces : (F, 3) int64 visual triangles; vertex_colors : (V, 4) uint8 or None
     regions : {finger: (P,) int64 node indices}; landmarks : {name: (L,) int64 visual vertices}
-    connection : ConnectionMap (V x n_s weights, rows sum to one)
+    connection : ConnectionMap (V x n_s weights, rows sum to one); skin : connection.Skin (the
+    visual mesh from `pose()`, picklable)
     report : BuildReport
     """
 
@@ -164,14 +165,18 @@ class LatexPuppet:
         self.regions = {r.name: r.nodes for r in regions}
         self.openings = {r.name: r.opening for r in regions}
         self._target_index = np.concatenate([r.nodes for r in regions]).astype(np.int64)
-        self._target_position = np.concatenate([r.rest for r in regions])
-        self._finger_stiffness = finger_stiffness
-        self._finger_damping = finger_damping
+        # one Control for every step: `step` rewrites its target rows in place
+        self._control = Control(targets=(self._target_index,
+                                         np.concatenate([r.rest for r in regions])),
+                                target_stiffness=finger_stiffness, target_damping=finger_damping)
+        self._target_position = self._control.target_position
         self._surface_count = len(surface_visual_index)
         self._node_rest = np.ascontiguousarray(model.rest_positions[:self._surface_count])
         self._visual = np.array(visual_vertices, dtype=np.float64)
         self._surface_view = self._visual.view()
         self._surface_view.setflags(write=False)
+        self.skin = _connection.Skin(connection, visual_vertices, self._node_rest)
+        self._skinned = True      # _visual follows the state (stepping leaves it to surface())
         self.state = model.state()
 
     # --- the shared puppet interface ---------------------------------------------------------
@@ -184,6 +189,7 @@ class LatexPuppet:
         """Back to rest: positions at rest, zero velocity, visual mesh at rest."""
         self.state = self.model.state()
         self._visual[...] = self.rest_vertices
+        self._skinned = True
 
     def step(self, dt: float, targets: Mapping | None = None) -> None:
         """Advance by dt [s] with finger targets {finger: value}.
@@ -219,25 +225,29 @@ class LatexPuppet:
             else:
                 raise ValueError(f"target {region.name!r} must be a bend (float 0..1) or a "
                                  f"position (3,) [m], got shape {array.shape}")
-        control = Control(targets=(self._target_index, out),
-                          target_stiffness=self._finger_stiffness,
-                          target_damping=self._finger_damping)
-        self.integrator.step(self.model, self.state, dt, control)
-        _connection.apply_connection(self.connection.indptr, self.connection.indices,
-                                     self.connection.weights, self.rest_vertices,
-                                     self._node_rest, self.state.x, self._visual)
+        self.integrator.step(self.model, self.state, dt, self._control)
+        self._skinned = False
 
     def surface(self) -> np.ndarray:
         """(V, 3) float [m] the deformed visual vertices now (a read-only view, updated in place
-        by the next step: copy it to keep it)."""
+        when asked for after a step: copy it to keep it). Computed from the surface nodes when
+        asked for, not by `step`: a render worker draws from `pose()` and `skin` instead."""
+        if not self._skinned:
+            self.skin(self.state.x, self._visual)
+            self._skinned = True
         return self._surface_view
+
+    def pose(self) -> np.ndarray:
+        """(n_s, 3) float [m] the surface nodes now (a view of the state): what `skin` turns
+        into the visual mesh, `skin(pose(), out)` equal to `surface()`."""
+        return self.state.x[:self._surface_count]
 
     # --- measurements ---------------------------------------------------------------------------
     def landmark(self, name: str) -> np.ndarray:
         """(3,) float [m] current mean position of a named landmark's visual vertices."""
         if name not in self.landmarks:
             raise ValueError(f"unknown landmark {name!r}; this puppet has {sorted(self.landmarks)}")
-        return self._visual[self.landmarks[name]].mean(0)
+        return self.surface()[self.landmarks[name]].mean(0)
 
     def mouth_gap(self) -> float:
         """Distance [m] between the upper_lip and lower_lip landmarks (puppets that have them)."""

@@ -1,7 +1,8 @@
 """The render worker: pictures beside the simulation, never in its way.
 
 The loop follows and simulates every frame; after each frame it hands the worker a snapshot (a
-copy of every character's deformed surface and the frame's state). The worker draws each
+copy of every character's deformed surface, or of what it follows: a latex puppet's surface
+nodes, `snapshot_parts`; and the frame's state). The worker draws each
 character's layer from the snapshot, composes the stage and writes the picture to every frame
 output (video, PNG, the preview's JPEG) - one write per session frame, in order.
 
@@ -46,20 +47,37 @@ FRAME_SLOTS = 4     # composed frames on their way back to the session's own out
 RENDER_NICE = 10    # the render process's nice increment: the loop wins a shared core
 
 
+def snapshot_parts(puppet):
+    """(take, skin): what a snapshot copies of a puppet after each frame (`take()`, an array)
+    and what draws its surface from that copy (`skin(copy, out)`; None: the copy is the
+    surface). A puppet whose drawn surface follows fewer numbers (a latex puppet's visual mesh
+    follows its surface nodes: `pose()` and `skin`) hands over those: a smaller copy, and the
+    mesh is computed beside the loop, not in it."""
+    skin, pose = getattr(puppet, "skin", None), getattr(puppet, "pose", None)
+    if skin is not None and callable(pose):
+        return pose, skin
+    return puppet.surface, None
+
+
 class FrozenPuppet:
     """What a layer renderer reads of a puppet, frozen at one frame: `surface()` and
-    `state.x` give the copy; anything else (faces, colours, the picture) is the puppet's."""
+    `state.x` give the copy (or, with a skin, the surface drawn from it when asked for);
+    anything else (faces, colours, the picture) is the puppet's."""
 
-    def __init__(self, puppet, surface: np.ndarray):
+    def __init__(self, puppet, copy: np.ndarray, skin=None):
         self._puppet = puppet
-        self._surface = surface
+        self._copy = copy
+        self._skin = skin
+        self._surface = copy if skin is None else np.empty(skin.shape)
         self.state = self
 
     @property
     def x(self) -> np.ndarray:
-        return self._surface
+        return self.surface()
 
     def surface(self) -> np.ndarray:
+        if self._skin is not None:
+            self._skin(self._copy, self._surface)
         return self._surface
 
     def __getattr__(self, name):
@@ -169,9 +187,12 @@ class RenderWorker:
         self.error: BaseException | None = None
         self.pictures = Pictures(stage, [(c.renderer, c.position) for c in self.characters],
                                  outputs, report=None if clock is None else clock.add)
-        self._surfaces = [[np.array(c.puppet.surface(), dtype=np.float64, copy=True)
-                           for c in self.characters] for _ in range(SLOTS)]
-        self._frozen = [[FrozenPuppet(c.puppet, s) for c, s in zip(self.characters, slot)]
+        parts = [snapshot_parts(c.puppet) for c in self.characters]
+        self._takes = [take for take, _ in parts]
+        self._surfaces = [[np.array(take(), dtype=np.float64, copy=True) for take in self._takes]
+                          for _ in range(SLOTS)]
+        self._frozen = [[FrozenPuppet(c.puppet, s, skin)
+                         for c, s, (_, skin) in zip(self.characters, slot, parts)]
                         for slot in self._surfaces]
         self._free = list(range(SLOTS))
         self._pending: list[tuple[int, int]] = []          # (slot, frame index), oldest first
@@ -215,8 +236,8 @@ class RenderWorker:
                 self._free.extend(slot for slot, _ in self._pending)
                 self._pending.clear()
             slot = self._free.pop()
-        for surface, character in zip(self._surfaces[slot], self.characters):
-            np.copyto(surface, character.puppet.surface())
+        for surface, take in zip(self._surfaces[slot], self._takes):
+            np.copyto(surface, take())
         with self._condition:
             self._pending.append((slot, index))
             self._condition.notify_all()
@@ -323,8 +344,10 @@ class RenderProcess:
                 self._remote.append((output, recipe))
             else:
                 self._local.append(output)
-        self._surfaces = [np.array(c.puppet.surface(), dtype=np.float64, copy=True)
-                          for c in self.characters]
+        parts = [snapshot_parts(c.puppet) for c in self.characters]
+        self._takes = [take for take, _ in parts]
+        self._skins = [skin for _, skin in parts]
+        self._surfaces = [np.array(take(), dtype=np.float64, copy=True) for take in self._takes]
         self._states = _States()
         self._ready = threading.Event()
         self._done = threading.Event()
@@ -359,7 +382,8 @@ class RenderProcess:
         self._pipe = ours
         spec = {"stage": self._stage, "layers": self._layers,
                 "positions": [c.position for c in self.characters],
-                "rest": self._surfaces, "layout": layout, "snapshot_bytes": snapshot_bytes,
+                "rest": self._surfaces, "skins": self._skins, "layout": layout,
+                "snapshot_bytes": snapshot_bytes,
                 "surfaces": surfaces.name, "frames": None if frames is None else frames.name,
                 "outputs": [recipe for _, recipe in self._remote], "lossless": self.lossless}
         self._process = context.Process(target=_child, name="mop-render",
@@ -412,8 +436,8 @@ class RenderProcess:
                     control[_STATE + waiting] = FREE
             slot = _slot_in(control, FREE)
             control[_STATE + slot] = FILLING
-        for view, character in zip(self._views[slot], self.characters):
-            np.copyto(view, character.puppet.surface())
+        for view, take in zip(self._views[slot], self._takes):
+            np.copyto(view, take())
         with self._condition:
             control[_INDEX + slot] = index
             control[_STATE + slot] = WAITING
@@ -620,9 +644,11 @@ def _build_child(spec, pipe, condition, control, memories, outputs):
     timings = _Timings()
     pictures = Pictures(stage, layers, outputs, report=timings.add)
     stage.clear()
-    for (renderer, position), surface in zip(layers, spec["rest"]):
-        stage.place(renderer.render(FrozenPuppet(None, surface)), position)
-    frozen = [[FrozenPuppet(None, view) for view in slot] for slot in views]
+    skins = spec["skins"]
+    for (renderer, position), surface, skin in zip(layers, spec["rest"], skins):
+        stage.place(renderer.render(FrozenPuppet(None, surface, skin)), position)
+    frozen = [[FrozenPuppet(None, view, skin) for view, skin in zip(slot, skins)]
+              for slot in views]
     return pictures, frozen, timings
 
 

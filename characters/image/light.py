@@ -229,16 +229,20 @@ def shadow_pixels(segmentation: LitSegmentation) -> tuple[np.ndarray, np.ndarray
 
 def _thin_ends(wide: np.ndarray, region: np.ndarray, foreground: np.ndarray) -> np.ndarray:
     """(H, W) bool: the parts of `region` (shaded and standing out) that the opening cut off
-    a wide shadow: its thin ends, such as the tip of a pocket between two limbs. A part joined
-    to a wide shadow is shadow if it also touches the lit background (a shadow's soft edge
-    fades into it), which a darker, greyer part inside the character never does."""
+    a wide shadow: its thin ends, such as the tip of a pocket between two limbs. They are
+    shadow when joined to a wide shadow that itself touches the lit background (a cast
+    shadow's soft edge fades into it), which a darker, greyer patch inside the character
+    (grass, a black seat on a grey backdrop) does not: joined to its speckled surroundings it
+    would carry the shadow far into the character."""
     cv2 = require_cv2()
     if not wide.any():
         return wide
-    count, labels = cv2.connectedComponents(region.astype(np.uint8), connectivity=8)
     lit = cv2.dilate((~foreground).astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
-    keep = (np.bincount(labels[wide], minlength=count) > 0) & \
-        (np.bincount(labels[lit & region], minlength=count) > 0)
+    count, parts = cv2.connectedComponents(wide.astype(np.uint8), connectivity=8)
+    cast = np.bincount(parts[lit & wide], minlength=count) > 0
+    cast[0] = False
+    count, labels = cv2.connectedComponents(region.astype(np.uint8), connectivity=8)
+    keep = np.bincount(labels[cast[parts]], minlength=count) > 0
     keep[0] = False
     return keep[labels] & ~wide
 

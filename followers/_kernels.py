@@ -163,17 +163,17 @@ def _advance_row(mixed, i, target, by, keep_scale):
         s0, s1, s2, s3 = mixed[i], mixed[i - 1], mixed[i - 2], mixed[i - 3]
         b0, b1, b2, b3 = by[0], by[1], by[2], by[3]
         for m in range(M):
-            v = (((s0[m] * b0[m] + s1[m] * b1[m]) + s2[m] * b2[m]) + s3[m] * b3[m]) * keep_scale
-            target[m] = v
-            total += v
-        return total
+            target[m] = (((s0[m] * b0[m] + s1[m] * b1[m]) + s2[m] * b2[m]) + s3[m] * b3[m]
+                         ) * keep_scale
+    else:
+        for m in range(M):
+            acc = 0.0
+            for a in range(by.shape[0]):
+                acc += mixed[i - a, m] * by[a, m]
+            target[m] = acc * keep_scale
+    # summed in a loop that writes nothing (see _lift_rows)
     for m in range(M):
-        acc = 0.0
-        for a in range(by.shape[0]):
-            acc += mixed[i - a, m] * by[a, m]
-        acc *= keep_scale
-        target[m] = acc
-        total += acc
+        total += target[m]
     return total
 
 
@@ -445,13 +445,17 @@ def _lift_rows(state, k, off, tops, dual, mixed):
     c1 = 0.0
     c2 = 0.0
     for t in range(2):
-        for r in range(off + support[k, t, 0], off + support[k, t, 1] + 1):
+        first, last = off + support[k, t, 0], off + support[k, t, 1]
+        for r in range(first, last + 1):
+            lift[r] = exp_nonpositive(logb[0, r] - top0 if rowsum[t, r] > 0.0 else -np.inf)
+        # the sums in a loop that writes nothing: a loop that also writes ``lift`` is
+        # compiled with a check of where the arrays lie, and sums in another order when the
+        # check fails, so the last bit would depend on the arrays' addresses
+        for r in range(first, last + 1):
             v = rowsum[t, r]
-            held = v > 0.0
-            e = exp_nonpositive(logb[0, r] - top0 if held else -np.inf)
-            lift[r] = e
-            c0 += v * e
+            c0 += v * lift[r]
             if dual:
+                held = v > 0.0
                 c1 += v * exp_nonpositive(logb[1, r] - top1 if held else -np.inf)
                 if mixed:
                     c2 += v * exp_nonpositive(logb[2, r] - top2 if held else -np.inf)

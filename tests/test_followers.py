@@ -11,11 +11,6 @@ from followers import (BankConfig, BankOutput, Follower, FollowerBank, FollowerC
 
 hmmc = pytest.importorskip("hmmlearn._hmmc")
 
-# two banks built alike can differ in the last bit (about 1e-16) from one instance to the
-# next: a known defect of the kernels' reassociated sums (docs/design/followers.md)
-NOT_BIT_FOR_BIT = pytest.mark.xfail(
-    strict=False, reason="bank results differ in the last bit between runs (fastmath reassoc)")
-
 
 # ---- slow, obvious references -------------------------------------------------------------------
 
@@ -817,7 +812,6 @@ def test_bank_outline_model_matches_hmmlearn_and_feeds_the_evidence(rng, actions
         BankConfig(outline_weight=-1.0)
 
 
-@NOT_BIT_FOR_BIT
 def test_bank_recognition_mixture_is_the_two_models_mixed_per_state(rng, actions):
     """With ``recognition_mixture = w`` the recognition score of a frame is
     log(w p_exact + (1 - w) p_tolerant), both from the same predicted states, p_exact with the

@@ -6,11 +6,6 @@ import pytest
 from followers import Follower, FollowerBank, combine, default_sigma, resample, time_warp
 from followers.demos import _align, average, is_takes
 
-# two banks built alike can differ in the last bit (about 1e-16) from one instance to the
-# next: a known defect of the kernels' reassociated sums (docs/design/followers.md)
-NOT_BIT_FOR_BIT = pytest.mark.xfail(
-    strict=False, reason="bank results differ in the last bit between runs (fastmath reassoc)")
-
 
 def curve(T=120, D=2):
     """A smooth two-channel gesture: a rise, a swing and a return."""
@@ -122,7 +117,6 @@ def test_bank_of_several_takes_has_one_template_per_action(rng):
         assert bank.actions[bank.follow(take)["action"][-1]] == name
 
 
-@NOT_BIT_FOR_BIT
 def test_a_list_of_one_take_is_that_take(rng):
     take = curve() + rng.normal(scale=0.01, size=(120, 2))
     other = curve()[::-1] + rng.normal(scale=0.01, size=(120, 2))

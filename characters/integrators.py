@@ -575,9 +575,9 @@ class ProjectiveDynamics(Integrator):
         # free nodes through their fixed neighbours and the local steps settle on inverted
         # springs
         chebyshev = self.chebyshev_rho is not None
-        kernels.pd_warm_start(x, v, h, fac.base, fac.x_start, control.target_index,
-                              control.target_position, control.target_stiffness,
-                              control.target_damping, fac.known_index, known,
+        targets = (control.target_index, control.target_position, control.target_stiffness,
+                   control.target_damping)
+        kernels.pd_warm_start(x, v, h, fac.base, fac.x_start, targets, fac.known_index, known,
                               fac.previous if chebyshev else fac.previous[:0])
         direct = x.flags.c_contiguous and not chebyshev
         rho2 = self.chebyshev_rho ** 2 if chebyshev else 0.0

@@ -753,7 +753,6 @@ def spring_energy_3d(x, si, sj, rest, k, scratch):
     return total
 
 
-
 # --- a projective-dynamics step's start and end (exact: numpy's arithmetic, no fastmath) ----
 
 @njit(cache=True, nogil=True)
@@ -771,11 +770,12 @@ def pd_step_start(x, v, x_start, v_start, known, pin_index, pin_goal):
 
 
 @njit(cache=True, nogil=True)
-def pd_warm_start(x, v, h, base, x_start, target_index, target_position, target_stiffness,
-                  target_damping, known_index, known, previous):
+def pd_warm_start(x, v, h, base, x_start, targets, known_index, known, previous):
     """The targets' share of the fixed right-hand side, base[t] += h^2 k_t p_t + h c_t x0_t
-    (target indices distinct), then the first iterate x += h v with known rows at known, and
-    previous := x (previous of shape (0, d): not kept)."""
+    (targets: (index (T,), position (T, d), stiffness (T,), damping (T,)), indices distinct),
+    then the first iterate x += h v with known rows at known, and previous := x (previous of
+    shape (0, d): not kept)."""
+    target_index, target_position, target_stiffness, target_damping = targets
     d = x.shape[1]
     hh = h * h
     for t in range(target_index.shape[0]):
@@ -799,6 +799,7 @@ def pd_step_end(x, x_start, h, v):
     for i in range(n):
         for a in range(d):
             v[i, a] = (x[i, a] - x_start[i, a]) / h
+
 
 @njit(**_JIT)
 def chebyshev_update(current, solved, previous, omega, gamma):

@@ -197,7 +197,6 @@ class ConnectionMap:
                           shape=(len(self.indptr) - 1, self.node_count))
 
 
-
 class Skin:
     """The visual mesh from the surface nodes, picklable (a render process can draw a puppet
     from its n surface nodes instead of its V visual vertices): `skin(nodes, out)` writes
@@ -215,6 +214,7 @@ class Skin:
         apply_connection(self.indptr, self.indices, self.weights, self.rest_visual,
                          self.node_rest, nodes, out)
         return out
+
 
 WEIGHTINGS = ("distance", "barycentric")
 

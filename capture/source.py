@@ -95,8 +95,9 @@ class Source:
         self.close()
 
     def __repr__(self) -> str:
-        return (f"{type(self).__name__}({self.spec or self.kind!r}, {len(self.channels)} "
-                f"channels, {self.status.value})")
+        count = len(self.channels)
+        return (f"{type(self).__name__}({self.spec or self.kind!r}, {count} "
+                f"channel{'' if count == 1 else 's'}, {self.status.value})")
 
     # -- helpers for subclasses -------------------------------------------------------------
     def _count(self, **increments) -> None:

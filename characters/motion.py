@@ -115,7 +115,8 @@ class Motion:
             raise KeyError(f"motion has no channel {name!r}; it has {self.channel_names}") from None
 
     def __repr__(self) -> str:
-        return (f"Motion({len(self._channels)} channels, {self.duration:.3f} s, "
+        count = len(self._channels)
+        return (f"Motion({count} channel{'' if count == 1 else 's'}, {self.duration:.3f} s, "
                 f"{self.interpolation.value})")
 
     def __eq__(self, other) -> bool:

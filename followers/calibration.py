@@ -57,8 +57,8 @@ class ChannelMap:
         """values (..., D) -> mapped copy (NaN stays NaN)."""
         arr = np.asarray(values, dtype=np.float64)
         if arr.shape[-1:] != self.gain.shape:
-            raise ValueError(f"values must end with {self.gain.shape[0]} channels, got shape "
-                             f"{arr.shape}")
+            raise ValueError(f"values must be (..., {self.gain.shape[0]}), one value a channel, "
+                             f"got shape {arr.shape}")
         return arr * self.gain + self.offset
 
     def fold(self, shift, scale) -> tuple[np.ndarray, np.ndarray]:

@@ -30,8 +30,8 @@ class ChannelNormaliser:
         """values (..., D) float -> normalised copy, same shape (NaN stays NaN)."""
         arr = np.asarray(values, dtype=np.float64)
         if arr.shape[-1:] != self.shift.shape:
-            raise ValueError(f"values must end with {self.shift.shape[0]} channels, got shape "
-                             f"{arr.shape}")
+            raise ValueError(f"values must be (..., {self.shift.shape[0]}), one value a channel, "
+                             f"got shape {arr.shape}")
         return (arr - self.shift) / self.scale
 
     def inverse(self, values) -> np.ndarray:

@@ -84,5 +84,6 @@ def test_bad_calibration_takes_are_refused_naming_the_problem():
         calibrate(Calibration(np.zeros(1), np.zeros(1), np.ones(1), ("b",)), one)
     with pytest.raises(ValueError, match="1 and 2 channels"):
         calibrate(one, Calibration(np.zeros(2), np.zeros(2), np.ones(2)))
-    with pytest.raises(ValueError, match="end with 1 channels"):
+    with pytest.raises(ValueError, match=r"must be \(\.\.\., 1\), one value a channel, "
+                                         r"got shape \(3, 2\)"):
         ChannelMap(np.ones(1), np.zeros(1))(np.zeros((3, 2)))

@@ -29,7 +29,8 @@ def test_normalise_shares_one_normaliser_and_round_trips(rng):
     np.testing.assert_array_equal(constant.scale, [1.0, 1.0])
     with pytest.raises(ValueError, match="'zscore' or 'range'"):
         fit_normaliser(a, how="minmax")
-    with pytest.raises(ValueError, match=r"end with 3 channels, got shape \(4,\)"):
+    with pytest.raises(ValueError, match=r"must be \(\.\.\., 3\), one value a channel, "
+                                         r"got shape \(4,\)"):
         normaliser(np.zeros(4))
 
 

@@ -379,8 +379,8 @@ class ImplicitEuler(Integrator):
             iterations = self._cholesky_pcg(model, b, factorisation, dv)
         else:
             kernels.invert_blocks(b.diag, b.free, b.diag_inverse)
-            iterations = kernels.block_pcg(model.springs, b.blocks, b.diag, b.diag_inverse,
-                                           b.free, b.rhs, dv, r, z, pvec, q, self.tolerance,
+            system = (model.springs, b.blocks, b.diag, b.diag_inverse, b.free)
+            iterations = kernels.block_pcg(system, b.rhs, dv, (r, z, pvec, q), self.tolerance,
                                            self.max_iterations)
         kernels.implicit_update(x, v, dv, b.free, h)
         if control.pin_index.size:
@@ -560,16 +560,16 @@ class ProjectiveDynamics(Integrator):
         if control.force_index.size:
             np.add.at(accel, control.force_index,
                       control.force_value / model.mass[control.force_index, None])
+        start = (fac.x_start, fac.v_start, accel, known)
         if model.dim == 3:
-            plan = fac.plan
-            kernels.pd_base_rhs_3d(fac.x_start, fac.v_start, known, plan.si, plan.sj,
-                                   fac.plan_damping_h, fac.couple_free, fac.couple_known,
-                                   fac.couple, model.mass, accel, fac.free_nodes, h,
-                                   model.velocity_damping, fac.base, fac.start_damping)
+            kernels.pd_base_rhs_3d(start, (fac.plan.si, fac.plan.sj, fac.plan_damping_h),
+                                   (fac.couple_free, fac.couple_known, fac.couple),
+                                   (model.mass, fac.free_nodes), h, model.velocity_damping,
+                                   fac.base, fac.start_damping)
         else:
-            kernels.pd_base_rhs(fac.x_start, fac.v_start, known, model.springs, model.stiffness,
-                                model.damping, model.mass, accel, fac.free_nodes, fac.free_id,
-                                h, model.velocity_damping, fac.base)
+            kernels.pd_base_rhs(start, (model.springs, model.stiffness, model.damping),
+                                (model.mass, fac.free_nodes, fac.free_id), h,
+                                model.velocity_damping, fac.base)
         # targets; warm start: carry the shape along with its velocity, x + h v. Not the usual
         # inertial prediction y = x + h v + h^2 a: when h^2 g exceeds an element's size, y drops
         # free nodes through their fixed neighbours and the local steps settle on inverted

@@ -487,15 +487,18 @@ def _dot(a, b):
 
 
 @njit(**_JIT)
-def block_pcg(springs, blocks, diag, diag_inverse, free, rhs, solution, r, z, p, q,
-              tolerance, max_iterations):
+def block_pcg(system, rhs, solution, work, tolerance, max_iterations):
     """Block-Jacobi preconditioned CG on A solution = rhs, over free nodes only.
 
-    Constrained nodes (free[i] == 0) keep their entries of `solution` (prescribed values);
-    their equations are dropped and their columns act through the residual. The initial
-    `solution` is the warm start. Stops when |r|_M^-1 <= tolerance |rhs|_M^-1. Returns the
-    iteration count.
+    system = (springs (M, 2) int, blocks, diag, diag_inverse, free (N,) float): the matrix as
+    block_matvec takes it, its inverted diagonal blocks and the free-node mask; work = (r, z,
+    p, q), four (N, d) scratch arrays. Constrained nodes (free[i] == 0) keep their entries of
+    `solution` (prescribed values); their equations are dropped and their columns act through
+    the residual. The initial `solution` is the warm start. Stops when |r|_M^-1 <= tolerance
+    |rhs|_M^-1. Returns the iteration count.
     """
+    springs, blocks, diag, diag_inverse, free = system
+    r, z, p, q = work
     n, d = rhs.shape
     block_matvec(springs, blocks, diag, solution, q)
     for i in range(n):
@@ -557,15 +560,20 @@ def implicit_update(x, v, dv, free, h):
 # --- projective dynamics (Liu et al. 2013) -------------------------------------------------
 
 @njit(**_JIT)
-def pd_base_rhs(x0, v0, known, springs, k, c, mass, accel, free_nodes, free_id, h,
-                velocity_damping, out):
+def pd_base_rhs(start, spring_set, nodes, h, velocity_damping, out):
     """The part of the global right-hand side that is fixed during one step.
 
+    start = (x0, v0, accel, known), each (N, d): the step's start positions [m] and velocities
+    [m/s], external accelerations [m/s^2], and the end-of-step positions of pinned/fixed nodes
+    [m]; spring_set = (springs (M, 2) int, k (M,) [N/m], c (M,) [N s/m]); nodes = (mass (N,)
+    [kg], free_nodes (F,) int, free_id (N,) int: a free node's row, -1 for a known node).
     Row free_id[i] of out belongs to free node i (rows of known nodes are left alone):
     out = M y + h c_vd M x0 + h C_L x0 + (h^2 L + h C_L) couplings to known nodes,
-    with y = x0 + h v0 + h^2 accel the inertial prediction; known (N, d) holds the end-of-step
-    positions of pinned/fixed nodes (free_id < 0). accel (N, d) [m/s^2] external accelerations.
+    with y = x0 + h v0 + h^2 accel the inertial prediction.
     """
+    x0, v0, accel, known = start
+    springs, k, c = spring_set
+    mass, free_nodes, free_id = nodes
     d = x0.shape[1]
     for f in range(free_nodes.shape[0]):
         i = free_nodes[f]
@@ -704,18 +712,22 @@ def pd_local_rhs_3d(x, si, sj, weight, start_damping, base, known_index, known, 
 
 
 @njit(**_JIT)
-def pd_base_rhs_3d(x0, v0, known, si, sj, damping_h, couple_free, couple_known, couple,
-                   mass, accel, free_nodes, h, velocity_damping, out, start_damping):
+def pd_base_rhs_3d(start, plan, boundary, nodes, h, velocity_damping, out, start_damping):
     """The fixed right-hand side of a 3D step for pd_local_rhs_3d (free_id is the identity on
     free nodes here): pd_base_rhs without the isotropic damper term, which cancels against the
     local step's transverse damping, and start_damping (3, M) = h c (x0_j - x0_i) in plan
     order for the local step.
 
-    Rows of known nodes receive stray sums: the local step overwrites them. damping_h (M,)
-    = h c in plan order; couple_free, couple_known (B,) int64 [node], couple (B,) [kg]: the
-    springs with exactly one known end, h^2 k + h c, which pull their free end towards the
-    known end's position.
+    start = (x0, v0, accel, known) as for pd_base_rhs; plan = (si, sj (M,) int64, damping_h
+    (M,) = h c), in plan order; boundary = (couple_free, couple_known (B,) int64 [node], couple
+    (B,) [kg]): the springs with exactly one known end, h^2 k + h c, which pull their free end
+    towards the known end's position; nodes = (mass (N,) [kg], free_nodes (F,) int). Rows of
+    known nodes receive stray sums: the local step overwrites them.
     """
+    x0, v0, accel, known = start
+    si, sj, damping_h = plan
+    couple_free, couple_known, couple = boundary
+    mass, free_nodes = nodes
     for f in range(free_nodes.shape[0]):
         i = free_nodes[f]
         m = mass[i]

@@ -103,8 +103,8 @@ def test_split_kernels_match_fused_in_any_spring_order(rng, chunk):
     free_id = np.where(mask, -1, np.arange(len(x)))
     accel = rng.normal(size=x.shape)
     base = np.zeros_like(x)
-    kernels.pd_base_rhs(x_start, v, known, model.springs, model.stiffness, model.damping,
-                        model.mass, accel, free_nodes, free_id, h, 0.3, base)
+    start, spring_set = (x_start, v, accel, known), (model.springs, model.stiffness, model.damping)
+    kernels.pd_base_rhs(start, spring_set, (model.mass, free_nodes, free_id), h, 0.3, base)
     expected = np.zeros_like(x)
     kernels.pd_local_rhs_damped(x, x_start, model.springs, weight, damping_h, base, known_index,
                                 known, expected)
@@ -114,11 +114,11 @@ def test_split_kernels_match_fused_in_any_spring_order(rng, chunk):
     rows = np.arange(one.sum())
     base_3d = np.zeros_like(x)
     start_damping = np.full((3, model.spring_count), np.nan)  # every entry must be written
-    kernels.pd_base_rhs_3d(x_start, v, known, plan.si, plan.sj, plan.take(damping_h),
-                           model.springs[one][rows, ends].astype(np.int64),
-                           model.springs[one][rows, 1 - ends].astype(np.int64),
-                           (h * h * model.stiffness + damping_h)[one], model.mass, accel,
-                           free_nodes, h, 0.3, base_3d, start_damping)
+    boundary = (model.springs[one][rows, ends].astype(np.int64),
+                model.springs[one][rows, 1 - ends].astype(np.int64),
+                (h * h * model.stiffness + damping_h)[one])
+    kernels.pd_base_rhs_3d(start, (plan.si, plan.sj, plan.take(damping_h)), boundary,
+                           (model.mass, free_nodes), h, 0.3, base_3d, start_damping)
     ends_sorted = x_start[plan.sj] - x_start[plan.si]
     np.testing.assert_allclose(start_damping, (plan.take(damping_h)[:, None] * ends_sorted).T,
                                rtol=1e-12, atol=1e-15)

@@ -305,18 +305,25 @@ def _timed_in_turns(calls, repeats: int, turns: int = 4) -> list[tuple[np.ndarra
 
 def _mediapipe_alone(tracker):
     """MediaPipe's own solution as the tracker sets it up, for its `process()`: the tracker's
-    own for face and pose; for hands a plain Hands graph (the tracker's graph takes one more
-    input, when to search for palms, which `process()` does not give)."""
-    if tracker.name != "hands":
+    own for face; for hands a plain Hands graph (the tracker's graph takes one more input, when
+    to search for palms, which `process()` does not give); for pose a plain Pose graph (the
+    tracker's runs the landmark model without its segmentation head)."""
+    if tracker.name == "face":
         return tracker._solution, None
-    from mediapipe.python.solutions import hands
+    from mediapipe.python.solutions import hands, pose
     from capture.camera.markerless import native_notices
     with native_notices():
-        solution = hands.Hands(
-            static_image_mode=False, max_num_hands=tracker.max_hands,
-            model_complexity=1 if tracker.model == "full" else 0,
-            min_detection_confidence=tracker.min_detection,
-            min_tracking_confidence=tracker.min_tracking)
+        if tracker.name == "hands":
+            solution = hands.Hands(
+                static_image_mode=False, max_num_hands=tracker.max_hands,
+                model_complexity=1 if tracker.model == "full" else 0,
+                min_detection_confidence=tracker.min_detection,
+                min_tracking_confidence=tracker.min_tracking)
+        else:
+            solution = pose.Pose(
+                static_image_mode=False, model_complexity=1, smooth_landmarks=False,
+                enable_segmentation=False, min_detection_confidence=tracker.min_detection,
+                min_tracking_confidence=tracker.min_tracking)
         solution.process(np.zeros((64, 64, 3), np.uint8))       # its models load here
     return solution, solution
 
@@ -362,11 +369,12 @@ def _time_markerless(name: str, options: dict, picture: str, image: np.ndarray,
     return float(np.median(cpu[searched])) if searched.any() else float(np.median(cpu))
 
 
-def bench_hand_landmarks(repeats: int, search: float) -> None:
+def bench_hand_landmarks(repeats: int, searches: dict) -> None:
     """The hand landmark model on one hand's crop of the frame (what each tracked hand costs
     a frame), cut out of MediaPipe's hands graph: its own nodes, image and hand rectangle in.
     The astronaut has no hand: the model runs all the same (it then says "no hand"). With
-    `search` [s], a palm search's CPU time, what a frame with one hand in view costs."""
+    `searches` {"full": s, "lite": s}, a palm search's CPU time with each model, what a frame
+    with one hand in view costs."""
     import cv2
     import mediapipe
     from mediapipe.framework import calculator_pb2
@@ -402,11 +410,12 @@ def bench_hand_landmarks(repeats: int, search: float) -> None:
         model.close()
         print(f"  hand landmark model {label}, one hand's crop: CPU {1e3 * np.median(cpu):6.2f}"
               f" ms a tracked hand a frame")
-    hand = np.median(timed[0][1])
-    print(f"  one hand in view, max_hands=2 (the sum of the parts above): "
-          f"{1e3 * hand:6.2f} ms a frame, {1e3 * (hand + search):6.2f} ms on the frames with a "
-          f"palm search (search_every=1: every frame), on average "
-          f"{1e3 * (hand + search / 3):6.2f} ms with search_every=3")
+    for (label, search), (_, cpu) in zip(searches.items(), timed):
+        hand = np.median(cpu)
+        print(f"  one hand in view, max_hands=2, model={label} (the sum of the parts above): "
+              f"{1e3 * hand:6.2f} ms a frame, {1e3 * (hand + search):6.2f} ms on the frames "
+              f"with a palm search (search_every=1: every frame), on average "
+              f"{1e3 * (hand + search / 3):6.2f} ms with search_every=3")
 
 
 def bench_graphs(repeats: int, folder: Path) -> None:
@@ -490,8 +499,10 @@ def bench_markerless(repeats: int, duration: float, folder: Path) -> None:
                     ("hands", {"model": "lite", "search_every": 1}, ""), ("pose", {}, "")]
         times = [_time_markerless(name, options, picture, pictures[picture], repeats)
                  for name, options, picture in variants]
-        # the palm search's time: the full model's, searching every frame
-        bench_hand_landmarks(repeats, times[variants.index(("hands", {"search_every": 1}, ""))])
+        # the palm search's time with each model, searching every frame
+        bench_hand_landmarks(repeats, {
+            "full": times[variants.index(("hands", {"search_every": 1}, ""))],
+            "lite": times[variants.index(("hands", {"model": "lite", "search_every": 1}, ""))]})
         print("  live path: a 30 fps MJPEG file played in real time through the camera source "
               "(reader thread + tracker thread); grab -> Frame in read()")
         frames = int(duration * 30)

@@ -224,6 +224,66 @@ def test_pose_lean_follows_a_rotated_body_and_no_hand_is_nan(tmp_path, photo):
     assert hands.shape[1] == 2 * len(HAND_CHANNELS) and np.isnan(hands).all()
 
 
+def test_the_pose_landmarks_are_the_full_models_to_the_bit(photo):
+    """The pose tracker runs the wheel's full landmark model without its segmentation head:
+    on the photo turned and moved frame by frame (tracked from frame to frame, the body found
+    again after an empty frame), its landmarks, visibilities and channels are those of
+    MediaPipe's own Pose graph with the whole model, exactly."""
+    from mediapipe.python.solutions import pose
+    from capture.camera.landmarks import pose_channels
+    from capture.camera.markerless import native_notices
+    from capture.camera.trackers import make_tracker
+    empty = np.full((H, W, 3), 100, np.uint8)
+    frames = [place(photo, placement(photo, angle=a, dx=4 * a, dy=-2 * a))
+              for a in (0, 0, 5, 10, 15, 20, 10, 0, -10, -20)]
+    frames[6:6] = [empty]
+    tracker = make_tracker("pose")
+    with native_notices():
+        whole = pose.Pose(static_image_mode=False, model_complexity=1, smooth_landmarks=False,
+                          enable_segmentation=False)
+    seen = 0
+    for frame in frames:
+        values = tracker.process(frame)
+        result = whole.process(cv2.cvtColor(frame, cv2.COLOR_BGR2RGB))
+        assert tracker.seen == (result.pose_landmarks is not None)
+        if not tracker.seen:
+            assert np.isnan(values).all()
+            continue
+        seen += 1
+        points, visibility = tracker.last_points()
+        image = np.array([(p.x, p.y, p.z) for p in result.pose_landmarks.landmark])
+        shown = np.array([p.visibility for p in result.pose_landmarks.landmark])
+        world = np.array([(p.x, p.y, p.z) for p in result.pose_world_landmarks.landmark])
+        assert np.array_equal(points, image) and np.array_equal(visibility, shown)
+        expected = pose_channels(image, shown, world, aspect=H / W)
+        assert np.array_equal(values, expected, equal_nan=True)
+    assert seen == len(frames) - 1
+    tracker.close()
+    whole.close()
+
+
+def test_the_pose_model_without_its_mask_keeps_every_other_output():
+    """`landmarks_only` on the wheel's pose landmark model: the mask's operators gone, the
+    five outputs in their places (the mask a 1x1x1x1 constant), every other tensor as it was."""
+    import mediapipe
+    from mediapipe.tasks.metadata import schema_py_generated as schema
+    from capture.camera.markerless import MODELS, landmarks_only
+    path = Path(mediapipe.__file__).parent / "modules" / MODELS["pose"][1]
+
+    def graph(data):
+        return schema.ModelT.InitFromObj(schema.Model.GetRootAsModel(data, 0)).subgraphs[0]
+    whole, lean = graph(path.read_bytes()), graph(landmarks_only(str(path)))
+    assert 0 < len(whole.operators) - len(lean.operators) < len(whole.operators) / 4
+    assert list(lean.outputs) == list(whole.outputs) and list(lean.inputs) == list(whole.inputs)
+    shapes = [list(g.tensors[t].shape) for g in (whole, lean) for t in g.outputs]
+    assert shapes[2] == [1, 256, 256, 1] and shapes[7] == [1, 1, 1, 1]
+    assert shapes[:2] + shapes[3:5] == shapes[5:7] + shapes[8:]
+    kept = {tuple(op.outputs) for op in lean.operators}
+    assert kept <= {tuple(op.outputs) for op in whole.operators}
+    with pytest.raises(ValueError, match="no output 5"):
+        landmarks_only(str(path), drop=5)
+
+
 def test_the_palm_search_runs_one_frame_in_search_every_while_no_hand_is_tracked():
     """No hand in the picture: the palm detector (observed in MediaPipe's graph) searches the
     first frame, then one frame in `search_every`; after a reset, the next frame; with

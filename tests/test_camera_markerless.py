@@ -229,15 +229,21 @@ def test_the_pose_landmarks_are_the_full_models_to_the_bit(photo):
     on the photo turned and moved frame by frame (tracked from frame to frame, the body found
     again after an empty frame), its landmarks, visibilities and channels are those of
     MediaPipe's own Pose graph with the whole model, exactly."""
+    import mediapipe
+    from mediapipe.python import packet_getter
     from mediapipe.python.solutions import pose
     from capture.camera.landmarks import pose_channels
-    from capture.camera.markerless import native_notices
+    from capture.camera.markerless import MODELS, landmarks_only, native_notices
     from capture.camera.trackers import make_tracker
     empty = np.full((H, W, 3), 100, np.uint8)
     frames = [place(photo, placement(photo, angle=a, dx=4 * a, dy=-2 * a))
               for a in (0, 0, 5, 10, 15, 20, 10, 0, -10, -20)]
     frames[6:6] = [empty]
     tracker = make_tracker("pose")
+    # the model the tracker's graph runs is the one without the mask's operators
+    model = packet_getter.get_bytes(tracker._solution._input_side_packets["pose_landmark_model"])
+    assert model == landmarks_only(str(Path(mediapipe.__file__).parent / "modules"
+                                       / MODELS["pose"][1]))
     with native_notices():
         whole = pose.Pose(static_image_mode=False, model_complexity=1, smooth_landmarks=False,
                           enable_segmentation=False)

@@ -597,11 +597,11 @@ def landmarks_only(path: str, drop: int = _POSE_MASK) -> bytes:
     the pose landmark model's segmentation mask, which nothing reads while segmentation is off.
     Its decoder of its own (46 operators, 8-channel layers at 128x128 and 256x256: little
     arithmetic, 9 % of the model's, on much memory) takes about 40 % of the model's time on
-    one x86 core. Every other operator
-    stays, in the same order, with the same weights, so the other outputs are the same to the
-    bit. The dropped output stays in its place as a constant 1x1x1x1 zero tensor, so a graph
-    that splits the outputs by position reads the others where it did; a graph that reads the
-    mask gets zeros. Weights only the removed operators read are dropped.
+    one x86 core. Every other operator stays, in the same order, with the same weights, so the
+    other outputs are the same to the bit. The dropped output stays in its place as a constant
+    1x1x1x1 zero tensor, so a graph that splits the outputs by position reads the others where
+    it did; a graph that reads the mask gets zeros. Weights only the removed operators read are
+    dropped.
 
     Built with MediaPipe's own TFLite schema module and flatbuffers (both in the wheel), once
     a process per file (about 0.3 s)."""

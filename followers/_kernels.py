@@ -69,11 +69,24 @@ def _emission_rows(model, state, k, first, last, all_observed, inv_scale2, norm_
     xs, observed, out = state.xs, state.observed, state.logb
     exact_scale2 = model.exact_inv2[k]
     D = xs.shape[0]
+    # every channel observed at the unscaled sigma (the common case): the factors that are
+    # exactly 1 left out
+    plain = all_observed and inv_scale2 == 1.0
     for j in range(first, last + 1):
         acc = 0.0
         acc_rec = 0.0
         acc_exact = 0.0
-        if dual:
+        if dual and plain:
+            for d in range(D):
+                diff = xs[d] - templates[j, d]
+                sq = diff * diff
+                v = weights[0, j, d] * sq
+                acc += v if v < cap else cap
+                w = weights[1, j, d] * sq
+                acc_rec += w if w < cap else cap
+                v *= exact_scale2[d]
+                acc_exact += v if v < cap else cap
+        elif dual:
             for d in range(D):
                 diff = xs[d] - templates[j, d]
                 sq = observed[d] * diff * diff
@@ -142,6 +155,9 @@ def _mix_speeds(model, state, track, first, last):
         for i in range(n):
             mixed[A + i, 0] = alpha[track, first + i, 0]
         return
+    if n * M <= model.change_tiled.shape[1]:
+        _mix_flat(model, state, track, first, n)
+        return
     stay, up, down = change[0], change[1], change[2]
     for i in range(n):
         row = alpha[track, first + i]
@@ -150,6 +166,27 @@ def _mix_speeds(model, state, track, first, last):
         for m in range(1, M - 1):
             out[m] = row[m] * stay[m] + row[m - 1] * up[m] + row[m + 1] * down[m]
         out[M - 1] = row[M - 1] * stay[M - 1] + row[M - 2] * up[M - 1]
+
+
+@inline
+def _mix_flat(model, state, track, first, n):
+    """``_mix_speeds`` of n rows (M > 1) as one pass over their n M values: a level's
+    neighbours are the values either side, the levels at a row's ends taking nothing across
+    it (their tiled coefficient is 0), so one loop runs over every row and level."""
+    alpha = state.alpha
+    S, M = alpha.shape[1], alpha.shape[2]
+    base = (track * S + first) * M
+    end = n * M - 1
+    src = state.flat_alpha[base:base + end + 1]
+    dst = state.flat_mixed[(model.advance.shape[0] - 1) * M:]
+    stay, up, down = model.change_tiled[0], model.change_tiled[1], model.change_tiled[2]
+    dst[0] = src[0] * stay[0] + src[1] * down[0]
+    # views shifted by one value, so that every index is the loop's own
+    below, at, above = src[:end - 1], src[1:end], src[2:]
+    into, stay_at, up_at, down_at = dst[1:end], stay[1:end], up[1:end], down[1:end]
+    for q in range(end - 1):
+        into[q] = at[q] * stay_at[q] + below[q] * up_at[q] + above[q] * down_at[q]
+    dst[end] = src[end] * stay[end] + src[end - 1] * up[end]
 
 
 @inline
@@ -178,6 +215,31 @@ def _advance_row(mixed, i, target, by, keep_scale):
 
 
 @inline
+def _advance_flat(model, state, track, first, n, keep_scale):
+    """``_advance_row`` of target rows first..first + n - 1 (none the absorbing last state,
+    A = 3) as one pass over their n M values, then each row's mass."""
+    alpha, rowsum = state.alpha, state.rowsum
+    S, M = alpha.shape[1], alpha.shape[2]
+    size = n * M
+    base = (track * S + first) * M
+    dst = state.flat_alpha[base:base + size]
+    src = state.flat_mixed
+    s0, s1, s2, s3 = src[3 * M:3 * M + size], src[2 * M:2 * M + size], src[M:M + size], \
+        src[:size]
+    by = model.advance_tiled
+    b0, b1, b2, b3 = by[0], by[1], by[2], by[3]
+    for q in range(size):
+        dst[q] = (((s0[q] * b0[q] + s1[q] * b1[q]) + s2[q] * b2[q]) + s3[q] * b3[q]) \
+            * keep_scale
+    # summed in a loop that writes nothing (see _lift_rows)
+    for i in range(n):
+        total = 0.0
+        for m in range(M):
+            total += alpha[track, first + i, m]
+        rowsum[track, first + i] = total
+
+
+@inline
 def _predict_track(model, state, track, off, T, lo, hi, keep_scale):
     """Transition one track: truncated to states [lo, hi] of the template, speed levels
     mixed (``_mix_speeds``), advanced; the mass times ``keep_scale`` (1 - restart). Returns
@@ -188,7 +250,12 @@ def _predict_track(model, state, track, off, T, lo, hi, keep_scale):
     top = min(hi + A, T - 1)
     # target state j takes mixed row j - a (zero outside [lo, hi]) with ``advance[a]``; the
     # absorbing end takes every advance that would pass it (``advance_tail``)
-    for j in range(lo, top + 1):
+    start = lo
+    flat = top - lo if top == T - 1 else top - lo + 1
+    if A == 3 and flat * alpha.shape[2] <= model.advance_tiled.shape[1]:
+        _advance_flat(model, state, track, off + lo, flat, keep_scale)
+        start = lo + flat
+    for j in range(start, top + 1):
         by = model.advance_tail if j == T - 1 else model.advance
         rowsum[track, off + j] = _advance_row(mixed, j - lo + A, alpha[track, off + j], by,
                                               keep_scale)

@@ -36,6 +36,8 @@ The layout of the state (see ``_kernels`` for the algorithm):
   frame's largest), ``sub (4, S)`` (see ``_kernels._subframe_rows``), ``mixed (T + 2A, M)``
   (one track's rows with their speed levels mixed, ``_kernels._mix_speeds``; T the longest
   template, A the largest advance).
+- ``flat_alpha``, ``flat_mixed``: ``alpha`` and ``mixed`` as one flat array each (views of the
+  same memory), for the kernels that run over a block of rows and levels as one loop.
 """
 from __future__ import annotations
 
@@ -67,6 +69,8 @@ class ForwardModel(NamedTuple):
     advance_tail: np.ndarray   # (A + 1, M): P(advance >= a), what lands on the last state
     speed_change: np.ndarray   # (3, M): P(level m stays), P(from m - 1 to m), P(m + 1 to m)
     initial_speed: np.ndarray  # (M,): speed level distribution of a new repetition
+    change_tiled: np.ndarray   # (3, L M): speed_change repeated along rows of M levels
+    advance_tiled: np.ndarray  # (A + 1, L M): advance likewise (L: the widest kept block + A)
     adapt: np.ndarray          # (2, 3): [forgetting factor, lowest, highest scale**2] per row
     cap: float                 # squared z-scores are capped at this (inf: plain Gaussian)
     prune: float               # edge states below this mass are dropped (0: never)
@@ -98,6 +102,8 @@ class ForwardState(NamedTuple):
     lift: np.ndarray
     sub: np.ndarray
     mixed: np.ndarray
+    flat_alpha: np.ndarray
+    flat_mixed: np.ndarray
 
 
 class Forward(NamedTuple):
@@ -174,6 +180,17 @@ def _transition_tables(transitions: TransitionModel):
             np.ascontiguousarray(transitions.initial_speed, dtype=np.float64))
 
 
+def _tiled(tables, windows: np.ndarray, lengths: np.ndarray):
+    """The speed change's and the advance's (rows, M) tables each repeated for as many rows
+    of M levels as a track's transition reaches at most (a kept block is at most 2 p + 1 states
+    of its template, and the advance adds A), so that a kernel runs over a block of rows and
+    levels as one flat array."""
+    advance, _, into, _ = tables
+    rows = int(np.minimum(lengths, 2 * np.minimum(windows, lengths) + 1).max())
+    rows += advance.shape[0] - 1
+    return np.tile(into, rows), np.tile(advance, rows)
+
+
 def _exact_scales(exact, K: int, D: int) -> np.ndarray:
     scales = np.ones((K, D))
     if exact is None:
@@ -238,12 +255,13 @@ def build_forward(templates: list[np.ndarray], sigmas: list[np.ndarray], windows
     lower, upper = span_bounds(stacked, outlier_span)
     adapt, prior = _adaptation(adaptation)
     report, report_prior = _adaptation(report_adaptation)
+    windows = np.ascontiguousarray(windows, dtype=np.int64)
+    tables = _transition_tables(transitions)
     model = ForwardModel(
-        stacked, offsets, lengths, np.ascontiguousarray(windows, dtype=np.int64), weights,
-        log_norm, log_norm_sum, np.ascontiguousarray(1.0 / scales ** 2),
-        np.ascontiguousarray(np.log(scales)), lower, upper,
-        *_transition_tables(transitions), np.stack([adapt, report]), float(cap), float(prune),
-        float(tilt), recognition is not None)
+        stacked, offsets, lengths, windows, weights, log_norm, log_norm_sum,
+        np.ascontiguousarray(1.0 / scales ** 2), np.ascontiguousarray(np.log(scales)), lower,
+        upper, *tables, *_tiled(tables, windows, lengths), np.stack([adapt, report]),
+        float(cap), float(prune), float(tilt), recognition is not None)
     return Forward(model, R, (transitions.restart_anywhere, transitions.restart),
                    np.array([prior, report_prior]))
 
@@ -254,15 +272,17 @@ def forward_state(forward: Forward) -> ForwardState:
     K, S, D = model.lengths.shape[0], model.templates.shape[0], model.templates.shape[1]
     M = model.initial_speed.shape[0]
     A = model.advance.shape[0] - 1
+    alpha = np.zeros((2, S, M))
+    mixed = np.zeros((int(model.lengths.max()) + 2 * A, M))
     state = ForwardState(
-        alpha=np.zeros((2, S, M)), rowsum=np.zeros((2, S)), logb=np.zeros((3, S)),
+        alpha=alpha, rowsum=np.zeros((2, S)), logb=np.zeros((3, S)),
         support=np.zeros((K, 2, 2), dtype=np.int64), moments=np.zeros((K, 2, 3)),
         main=np.zeros(K, dtype=np.int64), fresh=np.ones(K, dtype=np.bool_), loglik=np.zeros(K),
         frame_loglik=np.zeros((3, K)), scale2=np.ones((2, K)), scale_weight=np.zeros((2, K)),
         restart=np.tile(forward.restart, (K, 1)), subframe=np.zeros(K, dtype=np.bool_),
         mixture=np.zeros(1), outliers=np.zeros(1, dtype=np.int64), xs=np.zeros(D),
         observed=np.zeros(D), residual=np.zeros(S), lift=np.zeros(S), sub=np.zeros((4, S)),
-        mixed=np.zeros((int(model.lengths.max()) + 2 * A, M)))
+        mixed=mixed, flat_alpha=alpha.reshape(-1), flat_mixed=mixed.reshape(-1))
     _reset_tracks(forward, state)  # alpha and rowsum are fresh zeros
     return state
 

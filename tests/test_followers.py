@@ -167,6 +167,59 @@ def test_speed_transitions_match_dense_hmm(rng):
     np.testing.assert_allclose(trace.log_likelihood, loglik, rtol=1e-6)
 
 
+def transition_reference(model, rows, keep, T, lo):
+    """One track's transition written out: ``rows (n, M)``, the states lo.. of a template of
+    T states, each speed level given its neighbours' share, then every level advanced by 0..A
+    states, what passes the last state landing on it; returns the target states lo.. (M
+    levels each) times ``keep``."""
+    n, M = rows.shape
+    A = model.max_advance
+    mixed = rows * model.speed_change[:, 1]
+    mixed[:, 1:] += rows[:, :-1] * model.speed_change[:-1, 2]
+    mixed[:, :-1] += rows[:, 1:] * model.speed_change[1:, 0]
+    out = np.zeros((min(lo + n + A, T) - lo, M))
+    for i in range(n):
+        for a in range(A + 1):
+            out[min(lo + i + a, T - 1) - lo] += mixed[i] * model.advance[:, a]
+    return out * keep
+
+
+@pytest.mark.parametrize("levels", [4, 11])
+def test_a_tracks_transition_matches_the_written_out_one(rng, levels):
+    """The transition kernel, which runs over a block of states and speed levels as one flat
+    array, against ``transition_reference``: a block inside the template, one that reaches
+    its absorbing end, on either track, a block of one state, and one wider than a window
+    keeps (run row by row)."""
+    import numba as nb
+
+    from followers._kernels import _predict_track
+    from followers.model import build_forward, forward_state
+
+    @nb.njit
+    def predict(model, state, track, lo, hi, keep):
+        return _predict_track(model, state, track, model.offsets[1], model.lengths[1], lo,
+                              hi, keep)
+
+    chain = transition_model("speed", levels=levels, resolution=1)
+    templates = [random_template(rng, 30, 2), random_template(rng, 60, 2)]
+    forward = build_forward(templates, [np.ones((30, 2)), np.ones((60, 2))], np.array([8, 8]),
+                            chain, cap=25.0, prune=0.0, tilt=10.0, outlier_span=3.0)
+    model = forward.model
+    for track, lo, hi in [(0, 20, 36), (1, 45, 59), (1, 0, 16), (0, 52, 56), (0, 7, 7),
+                           (1, 10, 40)]:
+        state = forward_state(forward)
+        rows = rng.random((hi - lo + 1, chain.levels))
+        block = state.alpha[track, 30 + lo:30 + hi + 1]
+        block[:] = rows
+        top = predict(model, state, track, lo, hi, 0.97)
+        expect = transition_reference(chain, rows, 0.97, 60, lo)
+        assert top == lo + expect.shape[0] - 1
+        got = state.alpha[track, 30 + lo:30 + top + 1]
+        np.testing.assert_allclose(got, expect, rtol=1e-13, atol=0.0)
+        np.testing.assert_allclose(state.rowsum[track, 30 + lo:30 + top + 1],
+                                   expect.sum(axis=1), rtol=1e-13)
+
+
 def test_step_equals_follow_and_reset_starts_over(rng):
     template = random_template(rng, 50, 3)
     X, _ = time_warp(template, 1.3)

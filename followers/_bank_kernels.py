@@ -37,6 +37,18 @@ def capped_log_density(xs, observed, mean, inv_var, log_norm, cap):
     return total
 
 
+@kernel
+def observed_log_density(xs, mean, inv_var, log_norm_sum, cap):
+    """``capped_log_density`` of a frame with every channel observed: the normalising terms
+    summed beforehand (``log_norm_sum``, a float), so that a channel costs its squared z-score
+    alone."""
+    total = 0.0
+    for d in range(xs.shape[0]):
+        diff = xs[d] - mean[d]
+        total += min(diff * diff * inv_var[d], cap)
+    return log_norm_sum - 0.5 * total
+
+
 @inline
 def _outline_predict(alpha, k, restart):
     """Stay or move on with probability 0.5 each (the last state absorbing), then with
@@ -66,6 +78,7 @@ def outline_step(fmodel, fstate, bmodel, bstate, n_obs):
     K, S = alpha.shape
     predict = not bstate.outline_fresh[0]
     bstate.outline_fresh[0] = False
+    every = n_obs == fstate.xs.shape[0]
     for k in range(K):
         if predict:
             _outline_predict(alpha, k, bmodel.outline_restart)
@@ -74,8 +87,12 @@ def outline_step(fmodel, fstate, bmodel, bstate, n_obs):
             continue
         top = -np.inf
         for s in range(S):
-            b = capped_log_density(fstate.xs, fstate.observed, mean[k, s], inv_var[k, s],
-                                   log_norm[k, s], fmodel.cap)
+            if every:
+                b = observed_log_density(fstate.xs, mean[k, s], inv_var[k, s],
+                                         bmodel.outline_log_norm_sum[k, s], fmodel.cap)
+            else:
+                b = capped_log_density(fstate.xs, fstate.observed, mean[k, s], inv_var[k, s],
+                                       log_norm[k, s], fmodel.cap)
             scratch[s] = b
             if alpha[k, s] > 0.0 and b > top:
                 top = b

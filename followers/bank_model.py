@@ -33,6 +33,7 @@ class BankModel(NamedTuple):
     outline_mean: np.ndarray         # (K, S, D): each outline state's mean [input units]
     outline_inv_var: np.ndarray      # (K, S, D): 1 / its variance
     outline_log_norm: np.ndarray     # (K, S, D): -0.5 log(2 pi variance)
+    outline_log_norm_sum: np.ndarray  # (K, S): its sum over channels
     background_mean: np.ndarray      # (D,): the background Gaussian
     background_weight: np.ndarray    # (D,): 1 / its variance
     background_log_norm: np.ndarray  # (D,)
@@ -205,9 +206,10 @@ def build_bank_model(actions: list, config: BankConfig, *, resolution: int,
     rejecting = math.isfinite(c.reject_margin)
     hysteresis = c.reject_hysteresis if rejecting else 0.0
     idle = max(restart)
+    log_norm = -0.5 * np.log(2.0 * np.pi * variance)
     return BankModel(
-        outline_mean=outline_mean, outline_inv_var=1.0 / variance,
-        outline_log_norm=-0.5 * np.log(2.0 * np.pi * variance),
+        outline_mean=outline_mean, outline_inv_var=1.0 / variance, outline_log_norm=log_norm,
+        outline_log_norm_sum=log_norm.sum(axis=2),
         background_mean=stacked.mean(axis=0), background_weight=1.0 / spread ** 2,
         background_log_norm=-0.5 * np.log(2.0 * np.pi * spread ** 2),
         thresholds=np.full(K, c.reject_margin if rejecting else -1e300),

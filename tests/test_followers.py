@@ -865,6 +865,23 @@ def test_bank_outline_model_matches_hmmlearn_and_feeds_the_evidence(rng, actions
         BankConfig(outline_weight=-1.0)
 
 
+def test_a_frame_with_every_channel_scores_as_the_masked_density_does(rng):
+    """The outline models' density of a frame with every channel observed (the normalising
+    terms summed beforehand) is the masked, capped density's, caps included."""
+    from followers._bank_kernels import capped_log_density, observed_log_density
+
+    D = 60
+    mean, x = rng.normal(size=D), rng.normal(size=D)
+    x[:5] += 20.0  # beyond the cap
+    variance = rng.uniform(0.1, 2.0, size=D)
+    log_norm = -0.5 * np.log(2.0 * np.pi * variance)
+    masked = capped_log_density(x, np.ones(D), mean, 1.0 / variance, log_norm, 25.0)
+    assert observed_log_density(x, mean, 1.0 / variance, log_norm.sum(), 25.0) == \
+        pytest.approx(masked, rel=1e-14)
+    z2 = np.minimum((x - mean) ** 2 / variance, 25.0)
+    assert masked == pytest.approx(np.sum(log_norm - 0.5 * z2), rel=1e-14)
+
+
 def test_bank_recognition_mixture_is_the_two_models_mixed_per_state(rng, actions):
     """With ``recognition_mixture = w`` the recognition score of a frame is
     log(w p_exact + (1 - w) p_tolerant), both from the same predicted states, p_exact with the

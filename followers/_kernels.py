@@ -30,6 +30,36 @@ import numpy as np
 from followers._cells import subframe_moments, subframe_rows
 from followers._exp import exp_nonpositive
 from followers._jit import inline, kernel, plain
+from followers.config import FollowerConfig
+
+# the default number of speed levels: the loops over one state's levels run a count the
+# compiler knows for it (unrolled, no loop of unknown length per state)
+LEVELS = FollowerConfig.speed_levels
+
+
+@plain
+def _row_total(row):
+    """The sum of one state's levels, in order (compiled without reassociation, so that the
+    order does not depend on whether, or how, a loop around it is vectorised)."""
+    total = 0.0
+    if row.shape[0] == LEVELS:
+        for m in range(LEVELS):
+            total += row[m]
+    else:
+        for m in range(row.shape[0]):
+            total += row[m]
+    return total
+
+
+@inline
+def _scale_row(row, f):
+    """One state's levels times ``f``, in place."""
+    if row.shape[0] == LEVELS:
+        for m in range(LEVELS):
+            row[m] *= f
+    else:
+        for m in range(row.shape[0]):
+            row[m] *= f
 
 
 @inline
@@ -194,7 +224,6 @@ def _advance_row(mixed, i, target, by, keep_scale):
     """``target`` := keep_scale * sum over a of ``mixed`` row i - a times ``by[a]`` (per
     level); returns its mass."""
     M = target.shape[0]
-    total = 0.0
     if by.shape[0] == 4:
         # the common case (every advance of the speed model), in one pass over the levels
         s0, s1, s2, s3 = mixed[i], mixed[i - 1], mixed[i - 2], mixed[i - 3]
@@ -209,9 +238,7 @@ def _advance_row(mixed, i, target, by, keep_scale):
                 acc += mixed[i - a, m] * by[a, m]
             target[m] = acc * keep_scale
     # summed in a loop that writes nothing (see _lift_rows)
-    for m in range(M):
-        total += target[m]
-    return total
+    return _row_total(target)
 
 
 @inline
@@ -233,10 +260,7 @@ def _advance_flat(model, state, track, first, n, keep_scale):
             * keep_scale
     # summed in a loop that writes nothing (see _lift_rows)
     for i in range(n):
-        total = 0.0
-        for m in range(M):
-            total += alpha[track, first + i, m]
-        rowsum[track, first + i] = total
+        rowsum[track, first + i] = _row_total(alpha[track, first + i])
 
 
 @inline
@@ -553,7 +577,7 @@ def _weigh(model, state, k):
     ``frame_loglik[2, k]``). One pass finds each model's largest emission, one takes the
     exponentials of all three (the rows with mass may all sit far below the best row: then
     ``_predictive_loglik`` and the best product of mass and emission)."""
-    off, M, dual = model.offsets[k], state.alpha.shape[2], model.dual
+    off, dual = model.offsets[k], model.dual
     rowsum, logb, support, alpha, lift = (state.rowsum, state.logb, state.support,
                                           state.alpha, state.lift)
     mixture = state.mixture[0]
@@ -586,8 +610,7 @@ def _weigh(model, state, k):
             r = off + j
             f = lift[r] * inv
             rowsum[t, r] *= f
-            for m in range(M):
-                alpha[t, r, m] *= f
+            _scale_row(alpha[t, r], f)
     return c, shift
 
 
@@ -607,7 +630,7 @@ def _lost(state, k):
 def _normalise(model, state, k):
     """A frame with nothing observed: both tracks divided by their total mass c, whose log is
     the recognition score; returns c, or 0 (``_lost``)."""
-    off, M = model.offsets[k], state.alpha.shape[2]
+    off = model.offsets[k]
     rowsum, support, alpha = state.rowsum, state.support, state.alpha
     c = 0.0
     for t in range(2):
@@ -623,8 +646,7 @@ def _normalise(model, state, k):
         for j in range(support[k, t, 0], support[k, t, 1] + 1):
             r = off + j
             rowsum[t, r] *= inv
-            for m in range(M):
-                alpha[t, r, m] *= inv
+            _scale_row(alpha[t, r], inv)
     return c
 
 
@@ -712,8 +734,7 @@ def _finish(model, state, k, mt, refined):
         for j in range(support[k, et, 0], support[k, et, 1] + 1):
             r = off + j
             rowsum[et, r] *= inv
-            for m in range(alpha.shape[2]):
-                alpha[et, r, m] *= inv
+            _scale_row(alpha[et, r], inv)
         moments[k, et, 0] = 1.0
         moments[k, mt, 0] = 0.0
         moments[k, mt, 1] = 0.0

@@ -70,7 +70,8 @@ class ForwardModel(NamedTuple):
     speed_change: np.ndarray   # (3, M): P(level m stays), P(from m - 1 to m), P(m + 1 to m)
     initial_speed: np.ndarray  # (M,): speed level distribution of a new repetition
     change_tiled: np.ndarray   # (3, L M): speed_change repeated along rows of M levels
-    advance_tiled: np.ndarray  # (A + 1, L M): advance likewise (L: the widest kept block + A)
+    advance_tiled: np.ndarray  # (A + 1, L M): advance likewise (L: the widest kept block + A;
+                               # L = 0 unless A = 3)
     adapt: np.ndarray          # (2, 3): [forgetting factor, lowest, highest scale**2] per row
     cap: float                 # squared z-scores are capped at this (inf: plain Gaussian)
     prune: float               # edge states below this mass are dropped (0: never)
@@ -184,11 +185,13 @@ def _tiled(tables, windows: np.ndarray, lengths: np.ndarray):
     """The speed change's and the advance's (rows, M) tables each repeated for as many rows
     of M levels as a track's transition reaches at most (a kept block is at most 2 p + 1 states
     of its template, and the advance adds A), so that a kernel runs over a block of rows and
-    levels as one flat array."""
+    levels as one flat array. The advance only for A = 3 (the flat pass's four taps; other
+    advances run state by state): none is made that no kernel reads."""
     advance, _, into, _ = tables
     rows = int(np.minimum(lengths, 2 * np.minimum(windows, lengths) + 1).max())
     rows += advance.shape[0] - 1
-    return np.tile(into, rows), np.tile(advance, rows)
+    flat = rows if advance.shape[0] == 4 else 0
+    return np.tile(into, rows), np.tile(advance, flat)
 
 
 def _exact_scales(exact, K: int, D: int) -> np.ndarray:

@@ -294,14 +294,12 @@ class FollowerBank:
         Returns the bank's :class:`BankOutput`, **the same object every call** (fields updated
         in place; ``.copy()`` keeps a snapshot). No array is allocated when ``x`` is already a
         float64 array."""
-        frame = self._frame
-        frame[0] = check_frame(x, self.channels)
-        step, widen_shown, _ = self._kernels or self._entries()
-        step(self._forward.model, self._state, self._model, self._bank, frame[0])
-        self._still_window.push(frame[0])
-        self._publish(judged=True)
-        decision = self._bank.decision
-        self._shown[0] = decision[0] if decision[0] >= 0 else decision[1]
+        step, widen_shown, _, args = self._kernels or self._entries()
+        row = args[4]  # the frame, a view made once
+        row[:] = check_frame(x, row.shape[0])
+        step(*args)
+        self._still_window.push(row)
+        self._shown[0] = self._publish(judged=True)
         self._shown_progress[0] = self._out.progress
         self._shown_variance[0] = self._out.variance
         if widen_shown is not None:
@@ -312,15 +310,15 @@ class FollowerBank:
     def _entries(self):
         """``step``'s and ``reset``'s kernels resolved once for its own arrays
         (``followers._jit.entry``)."""
-        step = compiled_entry(_bank_kernels.bank_step, self._forward.model, self._state,
-                              self._model, self._bank, self._frame[0])
+        args = (self._forward.model, self._state, self._model, self._bank, self._frame[0])
+        step = compiled_entry(_bank_kernels.bank_step, *args)
         self._widen_args = widen_arguments(
             self._intervals, self.config.follower, self._shown, self._frame,
             self._shown_progress, self._shown_variance, self._interval_state)
         widen_shown = (None if self._widen_args is None
                        else compiled_entry(widen, *self._widen_args))
         gate = compiled_entry(_bank_kernels.gate, self._state, self._model, self._bank, -1)
-        self._kernels = (step, widen_shown, gate)
+        self._kernels = (step, widen_shown, gate, args)
         return self._kernels
 
     def _widen(self, X, shown, progress, variance) -> None:
@@ -330,9 +328,10 @@ class FollowerBank:
         if args is not None:
             widen(*args)
 
-    def _publish(self, judged: bool = False, quiet: bool = False) -> None:
+    def _publish(self, judged: bool = False, quiet: bool = False) -> int:
         """The output from the bank's state; ``judged``: the still stage judges this frame
-        (``followers.still``); ``quiet``: it showed no action for it already."""
+        (``followers.still``); ``quiet``: it showed no action for it already. Returns the
+        index of the action whose progress is shown."""
         out, decision = self._out, self._bank.decision
         active = int(decision[0])
         shown = active if active >= 0 else int(decision[1])
@@ -351,6 +350,7 @@ class FollowerBank:
         out.fit = float(self._bank.fit[shown])
         out.threshold = float(self._model.thresholds[shown])
         out.outlier = bool(self._state.outliers[0] > 0)
+        return shown
 
     def follow(self, X) -> dict[str, np.ndarray]:
         """Step through ``X (N, D)`` from a fresh start; returns arrays for plotting:

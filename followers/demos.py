@@ -193,16 +193,9 @@ def spread_of(template: np.ndarray, takes: list[np.ndarray], config: FollowerCon
     return np.sqrt(variance * n / (n - 1)), np.array(per_take)
 
 
-def combine(takes, *, config: FollowerConfig | None = None,
-            name: str = "action") -> Demonstrations:
-    """Several takes of one action (a list of (T_i, D) arrays, or one array) as one
-    :class:`Demonstrations`; ``config``: the followers' settings (the default sigma that
-    weighs channels in the alignment; the chain of the follower that measures the spread, at
-    one state per frame and a fixed sigma). ``name`` names the action in errors.
-
-    Raises ValueError for takes with different channels, too short or with non-finite values;
-    TypeError for what is not an array."""
-    config = FollowerConfig() if config is None else config
+def _validated(takes, name: str) -> list[np.ndarray]:
+    """The takes (one array, or a list of them) as validated (T_i, D) arrays of one D, short
+    enough to align."""
     if not is_takes(takes):
         takes = [as_template(takes, name=name)]
     else:
@@ -217,13 +210,35 @@ def combine(takes, *, config: FollowerConfig | None = None,
         raise ValueError(f"the takes of {name} are too long to align (the longest has {longest} "
                          f"frames; aligning it would take {longest ** 2 * 16 / 1e9:.1f} GB or "
                          f"so): cut each take to the action itself")
+    return takes
+
+
+def combine(takes, *, config: FollowerConfig | None = None, name: str = "action",
+            template: np.ndarray | None = None) -> Demonstrations:
+    """Several takes of one action (a list of (T_i, D) arrays, or one array) as one
+    :class:`Demonstrations`; ``config``: the followers' settings (the default sigma that
+    weighs channels in the alignment; the chain of the follower that measures the spread, at
+    one state per frame and a fixed sigma). ``name`` names the action in errors.
+    ``template`` (T, D), optional: the takes' template made elsewhere (a trained HMM's means,
+    say), around which their spread is measured; default: their average (``average``).
+
+    Raises ValueError for takes with different channels, too short or with non-finite values;
+    TypeError for what is not an array."""
+    config = FollowerConfig() if config is None else config
+    takes = _validated(takes, name)
     lengths = np.array([t.shape[0] for t in takes])
+    if template is not None:
+        template = as_template(template, name=f"template of {name}")
+        if template.shape[1] != takes[0].shape[1]:
+            raise ValueError(f"the template of {name} has {template.shape[1]} channels, its "
+                             f"takes {takes[0].shape[1]}")
     if len(takes) == 1:
-        return Demonstrations(takes[0], np.zeros_like(takes[0]), None, np.zeros(1), lengths,
-                              tuple(takes))
+        one = takes[0] if template is None else template
+        return Demonstrations(one, np.zeros_like(one), None, np.zeros(1), lengths, tuple(takes))
     noise = np.median(noise_sigmas(takes), axis=0)
     base = pooled_sigma(takes, config)
-    template = average(takes, 1.0 / base ** 2)
+    if template is None:
+        template = average(takes, 1.0 / base ** 2)
     measuring = config.replace(resolution=1, adapt_sigma=False, tempo_variance=False)
     spread, per_take = spread_of(template, takes, measuring)
     scale = np.maximum(template.std(axis=0), base)

@@ -10,7 +10,7 @@ from followers import _kernels
 from followers._jit import entry as compiled_entry
 from followers.config import FollowerConfig
 from followers.defaults import as_sigma, as_template, as_window, default_sigma, default_window
-from followers.demos import combine, is_takes
+from followers.demos import Demonstrations, combine, is_takes
 from followers.intervals import (interval_state, reset_interval, stacked, widen,
                                  widen_arguments)
 from followers.model import build_forward, check_frame, forward_state, reset_forward
@@ -100,7 +100,8 @@ class Follower:
     template : (T, D) float [input units], T >= 2 (a (T,) array is one channel): the action as
         demonstrated, one HMM state per frame; or a list of such arrays, several takes of the
         action: the template is then their average and the default sigma is widened per state
-        by how far they stray from it (``followers.demos``; ``demonstrations``).
+        by how far they stray from it (``followers.demos``; ``demonstrations``); or those takes
+        already combined (a :class:`~followers.demos.Demonstrations`).
     sigma : float, (D,) or (T, D) float [input units], optional: the Gaussian emission's
         standard deviation. Default: estimated from the template (``followers.defaults``),
         its scale then learned online (``config.adapt_sigma``); a given sigma is used as given.
@@ -117,7 +118,10 @@ class Follower:
         self.config = config = resolve_config(config, transitions, FollowerConfig.preset)
         model = chain(config, transitions)
         self._demonstrations = None
-        if is_takes(template):
+        if isinstance(template, Demonstrations):
+            self._demonstrations = template
+            tmpl = template.template.copy()
+        elif is_takes(template):
             self._demonstrations = combine(template, config=config)
             tmpl = self._demonstrations.template
         else:

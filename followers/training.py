@@ -8,9 +8,14 @@ time warping; the forward-backward pass runs in log space on the band of the tra
 matrix (``followers._baum_welch``), so no demonstration underflows and a step costs S (2 +
 skips) per frame, not S². Each variance is at least ``(0.05 rms spread)²`` of the
 demonstrations (the constrained maximum, so every iteration still raises the likelihood).
-The trained means become the follower's template and the trained per-state standard
-deviations its sigma (never below the single-template default, so three demonstrations that
-happen to agree do not make a brittle follower).
+
+``train_follower`` makes a follower of the model's means that carries its demonstrations
+(``followers.demos.combine`` around those means): its sigma is widened per state by how far
+the takes stray from the template, as a follower of several takes is, and a bank uses the
+takes as it uses an action's several takes. By default it runs no Baum–Welch update: the
+demonstrations aligned and averaged recognise other performers better than the maximum-
+likelihood means, which fit the demonstrations ever closer (states one demonstration skips
+and another dwells in; see ``docs/design/followers.md``).
 """
 from __future__ import annotations
 
@@ -22,9 +27,10 @@ import numba as nb
 import numpy as np
 
 from followers._baum_welch import accumulate, emission_log, forward_backward
-from followers.defaults import as_template, default_sigma
-from followers.demos import warp
-from followers.follower import Follower
+from followers.config import FollowerConfig
+from followers.defaults import as_template
+from followers.demos import combine, warp
+from followers.follower import Follower, resolve_config
 from followers.preprocessing import resample
 
 log = logging.getLogger(__name__)
@@ -37,7 +43,7 @@ class TrainedModel:
     means : (S, D) float [input units]; sigma : (S, D) float [input units]
     transitions : (S, S) float: trained transition matrix (left-to-right)
     log_likelihoods : (I,) float: total log-likelihood of the demonstrations before each
-        Baum–Welch update [nats] (non-decreasing up to rounding)
+        Baum–Welch update [nats] (non-decreasing up to rounding; empty for no update)
     seconds : float: the time training took
     """
 
@@ -114,7 +120,9 @@ def train_hmm(demonstrations, *, states: int | None = None, iterations: int = 10
 
     demonstrations : list of (T_i, D) float arrays [input units] (gaps filled; one is allowed).
     states : int, optional: number of states. Default: the median demonstration length.
-    iterations : int >= 1: Baum–Welch iterations. skips : int >= 0: states a transition may skip.
+    iterations : int >= 0: Baum–Welch iterations (0: the demonstrations aligned by dynamic
+    time warping to the median-length one and averaged per state, the starting point).
+    skips : int >= 0: states a transition may skip.
     """
     if isinstance(demonstrations, np.ndarray):
         demonstrations = [demonstrations]
@@ -130,8 +138,8 @@ def train_hmm(demonstrations, *, states: int | None = None, iterations: int = 10
     S = int(np.median(lengths)) if states is None else int(states)
     if S < 2:
         raise ValueError(f"states must be >= 2, got {S}")
-    if int(iterations) < 1:
-        raise ValueError(f"iterations must be >= 1, got {iterations}")
+    if int(iterations) < 0:
+        raise ValueError(f"iterations must be >= 0, got {iterations}")
     if int(skips) < 0:
         raise ValueError(f"skips must be >= 0, got {skips}")
     shortest = lengths.min()
@@ -203,15 +211,19 @@ def baum_welch(demos: list[np.ndarray], means: np.ndarray, var: np.ndarray, log_
     return history
 
 
-def train_follower(demonstrations, *, states: int | None = None, iterations: int = 10,
+def train_follower(demonstrations, *, states: int | None = None, iterations: int = 0,
                    window=None, transitions=None, config=None) -> Follower:
     """A :class:`~followers.Follower` from several demonstrations of one action.
 
-    The template is the trained HMM's means (S, D) and sigma its per-state standard deviations,
-    floored at ``followers.defaults.default_sigma`` of that template. The follower then uses its
-    own ``transitions`` (default ``"speed"``), not the trained ones: those describe the tempo of
-    the demonstrations, while a performer is followed from 0.5x to 2x of it."""
+    The template is the means of :func:`train_hmm` (``states``, ``iterations``; by default
+    the demonstrations aligned and averaged, without a Baum–Welch update), and the follower
+    carries the demonstrations combined around it (``followers.demos.combine``): its sigma
+    and, in a bank, the action's are the default widened per state by their spread, as for a
+    follower of several takes. The follower uses its own ``transitions`` (default
+    ``"speed"``), not the trained ones: those describe the tempo of the demonstrations, while
+    a performer is followed from 0.4x to 2.5x of it."""
     trained = train_hmm(demonstrations, states=states, iterations=iterations)
-    sigma = np.maximum(trained.sigma, default_sigma(trained.means))
-    return Follower(trained.means, sigma=sigma, window=window, transitions=transitions,
-                    config=config)
+    config = resolve_config(config, transitions, FollowerConfig.preset)
+    takes = [demonstrations] if isinstance(demonstrations, np.ndarray) else list(demonstrations)
+    combined = combine(takes, config=config, name="demonstrations", template=trained.means)
+    return Follower(combined, window=window, transitions=transitions, config=config)

@@ -3,6 +3,8 @@ training a follower from several demonstrations, and the confusability feedback.
 import numpy as np
 import pytest
 
+from followers.defaults import default_sigma, pooled_sigma
+
 from followers import (Confusability, FollowerBank, align, confusability, fill_gaps,
                        fit_normaliser, normalise, resample, time_warp, train_follower, train_hmm)
 
@@ -164,6 +166,32 @@ def test_trained_follower_follows_a_new_performance(rng):
     assert np.median(np.abs(trace.progress - position)) < 0.08
 
 
+def test_trained_follower_carries_its_demonstrations(rng):
+    """The template is the takes aligned and averaged (no Baum-Welch update by default), and
+    the takes' spread around it widens the follower's sigma and, in a bank, the action's."""
+    truth = smooth_template(rng, 60, 2)
+    demos = [time_warp(truth, s, jitter=0.1, rng=rng)[0] for s in (0.8, 1.0, 1.25)]
+    demos = [d + rng.normal(scale=0.2, size=d.shape) for d in demos]
+    follower = train_follower(demos)
+    np.testing.assert_array_equal(follower.template, train_hmm(demos, iterations=0).means)
+    assert follower.length == int(np.median([len(d) for d in demos]))
+    carried = follower.demonstrations
+    assert carried.count == 3 and np.array_equal(carried.template, follower.template)
+    assert not follower.sigma_given and (carried.spread > 0).all()
+    base = default_sigma(follower.template, pooled=demos)
+    np.testing.assert_allclose(follower.sigma, np.sqrt(
+        base ** 2 + follower.config.spread_weight * carried.spread ** 2), rtol=1e-12)
+    other = smooth_template(rng, 50, 2)
+    bank = FollowerBank({"trained": follower, "other": other})
+    config = bank.config
+    following = config.following_scale * pooled_sigma(demos + [other], config.follower)
+    np.testing.assert_allclose(bank.sigma("trained"), np.sqrt(
+        following ** 2 + config.follower.spread_weight * carried.spread ** 2), rtol=1e-12)
+    np.testing.assert_allclose(bank.sigma("other"), np.broadcast_to(following, other.shape))
+    refined = train_follower(demos, iterations=3)
+    assert not np.allclose(refined.template, follower.template)
+
+
 def test_training_rejects_bad_input(rng):
     with pytest.raises(ValueError, match="same channels"):
         train_hmm([np.zeros((20, 2)), np.zeros((20, 3))])
@@ -171,6 +199,8 @@ def test_training_rejects_bad_input(rng):
         train_hmm([rng.normal(size=(10, 2))], states=50)
     with pytest.raises(ValueError, match="at least one demonstration"):
         train_hmm([])
+    with pytest.raises(ValueError, match="iterations must be >= 0"):
+        train_hmm([rng.normal(size=(10, 2))], iterations=-1)
 
 
 # ---- confusability ------------------------------------------------------------------------------

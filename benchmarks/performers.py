@@ -3,6 +3,7 @@
     python3 benchmarks/performers.py            # everything (about ten minutes on 2 cores)
     python3 benchmarks/performers.py --quick    # fewer draws and recordings
     python3 benchmarks/performers.py --only recognition|calibration|rejection|intervals|still|timing
+    python3 benchmarks/performers.py --only intervals --split train   # choosing: train takes
 
 Every protocol takes the demonstrations from a set's train split and the performances from
 its test split (other takes, other performers); every setting was chosen on train splits
@@ -275,13 +276,14 @@ def coverage(templates, rng, differ):
 
 
 def intervals(args):
-    say("\n== 90 % progress interval coverage, test takes as templates, a default Follower "
-        "each; another performer = gain +-15 %, offset 0.1 spread, smoothing ==")
+    say(f"\n== 90 % progress interval coverage, {args.split} takes as templates, a default "
+        "Follower each; another performer = gain +-15 %, offset 0.1 spread, smoothing ==")
     count = 10 if args.quick else 40
     worst = []
     for name, data in (("GunPoint", gunpoint()), ("PickupGestureWiimoteZ", wiimote()),
                        ("BasicMotions", basic_motions())):
-        templates = [t for t in data[2] if len(t) >= 20][:count]
+        takes = data[0] if args.split == "train" else data[2]
+        templates = [t for t in takes if len(t) >= 20][:count]
         for differ in (True, False):
             got = coverage(templates, np.random.default_rng(4), differ)
             if differ:
@@ -399,6 +401,8 @@ def main():
     parser.add_argument("--quick", action="store_true", help="fewer draws and recordings")
     parser.add_argument("--only", choices=("recognition", "calibration", "rejection",
                                            "intervals", "still", "timing"), default=None)
+    parser.add_argument("--split", choices=("train", "test"), default="test",
+                        help="the takes the intervals are measured on (train: while choosing)")
     args = parser.parse_args()
     for name, section in (("timing", timing), ("recognition", recognition),
                           ("calibration", calibration),

@@ -31,6 +31,7 @@ from followers._cells import subframe_moments, subframe_rows
 from followers._exp import exp_nonpositive
 from followers._jit import inline, kernel, plain
 from followers.config import FollowerConfig
+from followers.intervals import RHO_MAX
 
 # the default number of speed levels: the loops over one state's levels run a count the
 # compiler knows for it (unrolled, no loop of unknown length per state)
@@ -432,7 +433,7 @@ def _emit(model, state, k, n_obs):
     support = state.support
     mt = state.main[k]
     et = 1 - mt
-    s2 = state.scale2[0, k]
+    s2 = state.scale2[0, k] * state.temper[k, 0]
     inv_scale2 = 1.0 / s2
     norm_shift = -0.5 * n_obs * math.log(s2)
     exact_shift = 0.0
@@ -654,15 +655,17 @@ def _normalise(model, state, k):
 def _adapt_recursion(model, state, k, n_obs, s2):
     """EM on the recursion's emission scale: its maximum-likelihood value given this frame is
     the posterior-expected squared z-score per channel (in units of the unscaled sigma); a
-    forgetful mean of it over recent frames becomes the scale of the next frames."""
+    forgetful mean of it over recent frames becomes the scale of the next frames. ``s2``: the
+    scale squared the frame was weighed with (the learned one times the tempering)."""
     off, support, adapt = model.offsets[k], state.support, model.adapt
     expected = 0.0
     for t in range(2):
         for j in range(support[k, t, 0], support[k, t, 1] + 1):
             expected += state.rowsum[t, off + j] * state.residual[off + j]
     target = s2 * expected / n_obs
+    learned = state.scale2[0, k]
     state.scale_weight[0, k] = adapt[0, 0] * state.scale_weight[0, k] + 1.0
-    new_s2 = s2 + (target - s2) / state.scale_weight[0, k]
+    new_s2 = learned + (target - learned) / state.scale_weight[0, k]
     state.scale2[0, k] = min(max(new_s2, adapt[0, 1]), adapt[0, 2])
 
 
@@ -687,6 +690,45 @@ def _adapt_report(model, state, k):
         state.scale_weight[1, k] = adapt[1, 0] * state.scale_weight[1, k] + 1.0
         r2 += (r2 * expected / mass - r2) / state.scale_weight[1, k]
         state.scale2[1, k] = min(max(r2, adapt[1, 1]), adapt[1, 2])
+
+
+@inline
+def _temper(model, state, k):
+    """The recursion's emission variance for the next frame, widened by the residual's
+    correlation (``followers.intervals``, here in the recursion): per channel the posterior's
+    mean residual in units of the unscaled sigma, clipped at ``model.temper[2]`` sigmas; an
+    exponential window (forgetting factor ``model.temper[0]``) of its lag-one and lag-zero
+    products, averaged over the observed channels, gives ``rho`` in [0, RHO_MAX];
+    ``state.temper[k, 0]`` := min(``model.temper[1]``, (1 + rho) / (1 - rho)). A residual
+    correlated from frame to frame (another performer: a gain, an offset, a smoother hand)
+    counts less per frame, so that a level the template does not reach costs the follower
+    less than running off to where it does; an independent one (the take replayed) leaves the
+    recursion as it was. ``state.temper[k]``: [factor, lag-one sum, lag-zero sum, the previous
+    residual per channel]."""
+    off, support, rowsum = model.offsets[k], state.support, state.rowsum
+    templates, weights, xs, observed = model.templates, model.weights, state.xs, state.observed
+    decay, cap, clip = model.temper[0], model.temper[1], model.temper[2]
+    sums = state.temper[k]
+    lag1 = 0.0
+    lag0 = 0.0
+    seen = 0
+    for d in range(xs.shape[0]):
+        if observed[d] == 0.0:
+            sums[3 + d] = 0.0
+            continue
+        r = 0.0
+        for t in range(2):
+            for j in range(off + support[k, t, 0], off + support[k, t, 1] + 1):
+                r += rowsum[t, j] * (xs[d] - templates[j, d]) * math.sqrt(weights[0, j, d])
+        r = min(max(r, -clip), clip)
+        lag1 += r * sums[3 + d]
+        lag0 += r * r
+        sums[3 + d] = r
+        seen += 1
+    sums[1] = decay * sums[1] + (1.0 - decay) * lag1 / seen
+    sums[2] = decay * sums[2] + (1.0 - decay) * lag0 / seen
+    rho = min(max(sums[1] / sums[2], 0.0), RHO_MAX)
+    sums[0] = min(cap, (1.0 + rho) / (1.0 - rho))
 
 
 @inline
@@ -767,7 +809,9 @@ def template_step(model, state, k, n_obs):
         c = _normalise(model, state, k)
     if c == 0.0:
         return
-    s2 = state.scale2[0, k]
+    s2 = state.scale2[0, k] * state.temper[k, 0]
+    if model.temper[1] > 1.0 and n_obs > 0:
+        _temper(model, state, k)
     refined = state.subframe[k] and n_obs > 0
     if refined:
         if model.adapt[1, 0] <= 0.0:

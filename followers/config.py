@@ -151,6 +151,10 @@ class FollowerConfig(_Config):
                                 "(followers.intervals)", low=0.0, low_open=True)
     residual_cap: float = _f(20.0, "x variance", "the reported variance is widened at most "
                              "this much (1: not at all)", low=1.0)
+    residual_temper: float = _f(2.0, "x emission variance", "the recursion's emission variance "
+                                "(an estimated sigma) is widened by the residual's correlation, "
+                                "at most this much (1: not at all; followers.intervals)",
+                                low=1.0)
     spread_weight: float = _f(0.3, "x spread squared", "with several demonstrations, their "
                               "spread around the averaged template enters each state's "
                               "emission variance with this weight", low=0.0)
@@ -172,7 +176,7 @@ class FollowerConfig(_Config):
         if transitions == "mop":
             return cls(transitions="mop", resolution=1, restart=0.0, outlier_sigmas=math.inf,
                        prune_mass=0.0, adapt_sigma=False, subframe=False, tempo_variance=False,
-                       residual_cap=1.0)
+                       residual_cap=1.0, residual_temper=1.0)
         if transitions == "skip":
             return cls(transitions="skip", resolution=1, tempo_variance=False)
         return cls(transitions=transitions)
@@ -184,7 +188,7 @@ class FollowerConfig(_Config):
         base = cls.preset(transitions)
         if transitions == "speed":
             base = base.replace(resolution=1, speed_jitter=0.01)
-        return base.replace(adapt_sigma=False, tempo_variance=False)
+        return base.replace(adapt_sigma=False, tempo_variance=False, residual_temper=1.0)
 
 
 @dataclass(frozen=True)

@@ -87,6 +87,14 @@ def adaptation(config: FollowerConfig, learn: bool):
     return (config.adapt_memory, config.adapt_prior, config.adapt_lowest, config.adapt_highest)
 
 
+def tempering(config: FollowerConfig, on: bool):
+    """(memory, largest factor, clip) of the recursion's tempering by the residual's
+    correlation, or None when off."""
+    if not (on and config.residual_temper > 1.0):
+        return None
+    return (config.residual_memory, config.residual_temper, config.outlier_sigmas)
+
+
 def _own(array: np.ndarray, given) -> np.ndarray:
     """``array`` (validated from ``given``), copied if it shares memory with ``given``."""
     if isinstance(given, np.ndarray) and np.may_share_memory(array, given):
@@ -146,7 +154,8 @@ class Follower:
             cap=config.outlier_sigmas ** 2, prune=config.prune_mass, tilt=config.subframe_tilt,
             outlier_span=config.outlier_span,
             adaptation=adaptation(config, config.adapt_sigma and not given and not mop),
-            report_adaptation=adaptation(config, not given))
+            report_adaptation=adaptation(config, not given),
+            temper=tempering(config, not given and not mop))
         self._state = forward_state(self._forward)
         self._state.subframe[:] = config.subframe
         self._template = tmpl

@@ -23,6 +23,11 @@ width squared, ``FollowerConfig.resolution`` states per template frame): a poste
 state has almost no variance, while a performer who differs is off by a part of a state that
 no factor of it reaches. Independent residuals within the sigma (the demonstration replayed)
 leave the interval as it was.
+
+A lone follower's recursion is tempered by the same correlation, from the posterior's mean
+residual, at most ``FollowerConfig.residual_temper`` times (``_kernels._temper``): correlated
+frames count as fewer frames there too, so that a level the template does not reach does not
+pull the follower off to where the template meets it. The report is widened on top as above.
 """
 from __future__ import annotations
 

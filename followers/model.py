@@ -26,6 +26,9 @@ The layout of the state (see ``_kernels`` for the algorithm):
 - ``scale2 (2, K)``, ``scale_weight (2, K)``: each template's learned emission scale squared
   (row 0: the recursion's, row 1: the report's inside a cell) and the forgetful counts behind
   them (``model.adapt``: forgetting factor, lowest and highest scale squared; factor 0: fixed).
+- ``temper (K, 3 + D)``: each template's tempering of the recursion's emission variance
+  (``model.temper``): the factor in force, the lag-one and lag-zero sums of the residual
+  and its last value per channel (``_kernels._temper``).
 - Set by the owner between frames: ``restart (K, 2)`` [probability per frame of a new
   repetition from anywhere, from the last state], ``subframe (K,)`` (report the position
   inside a state's cell), ``mixture (1,)`` (the weight above).
@@ -73,6 +76,8 @@ class ForwardModel(NamedTuple):
     advance_tiled: np.ndarray  # (A + 1, L M): advance likewise (L: the widest kept block + A;
                                # L = 0 unless A = 3)
     adapt: np.ndarray          # (2, 3): [forgetting factor, lowest, highest scale**2] per row
+    temper: np.ndarray         # (3,): [forgetting factor, largest factor (1: off), clip
+                               # (sigmas)] of the tempering (``_kernels._temper``)
     cap: float                 # squared z-scores are capped at this (inf: plain Gaussian)
     prune: float               # edge states below this mass are dropped (0: never)
     tilt: float                # steepest prior slope across a cell [nats per frame]
@@ -93,6 +98,7 @@ class ForwardState(NamedTuple):
     frame_loglik: np.ndarray
     scale2: np.ndarray
     scale_weight: np.ndarray
+    temper: np.ndarray
     restart: np.ndarray
     subframe: np.ndarray
     mixture: np.ndarray
@@ -166,6 +172,14 @@ def _emission_tables(sigmas: list[np.ndarray], rec: list[np.ndarray] | None, fac
     return weights, log_norm, log_norm.sum(axis=2)
 
 
+def _tempering(setting) -> np.ndarray:
+    """[forgetting factor, largest factor, clip] of the tempering; [0, 1, 0] (off) for None."""
+    if setting is None:
+        return np.array([0.0, 1.0, 0.0])
+    memory, cap, clip = (float(v) for v in setting)
+    return np.array([math.exp(-1.0 / memory), cap, min(clip, 1e300)])
+
+
 def _transition_tables(transitions: TransitionModel):
     """The transition model's tables by level along the last axis (what the kernels'
     innermost loops run over)."""
@@ -223,7 +237,7 @@ def span_bounds(stacked: np.ndarray, span: float) -> tuple[np.ndarray, np.ndarra
 def build_forward(templates: list[np.ndarray], sigmas: list[np.ndarray], windows,
                   transitions: TransitionModel, *, cap: float, prune: float, tilt: float,
                   outlier_span: float, recognition: list[np.ndarray] | None = None,
-                  exact=None, adaptation=None, report_adaptation=None) -> Forward:
+                  exact=None, adaptation=None, report_adaptation=None, temper=None) -> Forward:
     """The forward model of K followers that share one transition model.
 
     templates, sigmas : K (T_k, D) float arrays (validated) [input units]; windows (K,) int
@@ -236,6 +250,8 @@ def build_forward(templates: list[np.ndarray], sigmas: list[np.ndarray], windows
         (a float or (K, D)), or None for no mixture.
     adaptation, report_adaptation : (memory [frames], prior [frames], lowest, highest scale)
         of the recursion's and the report's online emission scale, or None (fixed).
+    temper : (memory [frames], largest factor, clip [sigmas]) of the tempering of the
+        recursion's emission variance by the residual's correlation, or None (none).
     """
     R = transitions.resolution
     if R > 1:
@@ -264,7 +280,7 @@ def build_forward(templates: list[np.ndarray], sigmas: list[np.ndarray], windows
         stacked, offsets, lengths, windows, weights, log_norm, log_norm_sum,
         np.ascontiguousarray(1.0 / scales ** 2), np.ascontiguousarray(np.log(scales)), lower,
         upper, *tables, *_tiled(tables, windows, lengths), np.stack([adapt, report]),
-        float(cap), float(prune), float(tilt), recognition is not None)
+        _tempering(temper), float(cap), float(prune), float(tilt), recognition is not None)
     return Forward(model, R, (transitions.restart_anywhere, transitions.restart),
                    np.array([prior, report_prior]))
 
@@ -282,7 +298,8 @@ def forward_state(forward: Forward) -> ForwardState:
         support=np.zeros((K, 2, 2), dtype=np.int64), moments=np.zeros((K, 2, 3)),
         main=np.zeros(K, dtype=np.int64), fresh=np.ones(K, dtype=np.bool_), loglik=np.zeros(K),
         frame_loglik=np.zeros((3, K)), scale2=np.ones((2, K)), scale_weight=np.zeros((2, K)),
-        restart=np.tile(forward.restart, (K, 1)), subframe=np.zeros(K, dtype=np.bool_),
+        temper=np.zeros((K, 3 + D)), restart=np.tile(forward.restart, (K, 1)),
+        subframe=np.zeros(K, dtype=np.bool_),
         mixture=np.zeros(1), outliers=np.zeros(1, dtype=np.int64), xs=np.zeros(D),
         observed=np.zeros(D), residual=np.zeros(S), lift=np.zeros(S), sub=np.zeros((4, S)),
         mixed=mixed, flat_alpha=alpha.reshape(-1), flat_mixed=mixed.reshape(-1))
@@ -310,6 +327,9 @@ def _reset_tracks(forward: Forward, state: ForwardState) -> None:
     state.outliers[:] = 0
     state.scale2[:] = 1.0
     state.scale_weight[:] = forward.scale_prior[:, None]
+    state.temper[:] = 0.0
+    state.temper[:, 0] = 1.0
+    state.temper[:, 2] = 1e-9
 
 
 def check_frame(x, channels: int) -> np.ndarray:

@@ -727,7 +727,7 @@ def _temper(model, state, k):
         seen += 1
     sums[1] = decay * sums[1] + (1.0 - decay) * lag1 / seen
     sums[2] = decay * sums[2] + (1.0 - decay) * lag0 / seen
-    rho = min(max(sums[1] / sums[2], 0.0), RHO_MAX)
+    rho = min(max(sums[1] / sums[2], 0.0), RHO_MAX) if sums[2] > 0.0 else 0.0
     sums[0] = min(cap, (1.0 + rho) / (1.0 - rho))
 
 

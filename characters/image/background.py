@@ -544,7 +544,8 @@ def _find_character(rgb, kind, *, plain, tolerance, close_gaps, max_hole_fractio
     refined = light.refine_edge(contrast.smoothed, contrast.background, first,
                                 sure_background=contrast.shadows)
     refined = largest_component(light.settle_edge(rgb, contrast.background,
-                                                  largest_component(refined)))
+                                                  largest_component(refined),
+                                                  contrast.smoothed))
     mask = fill_holes(refined if refined.any() else first, max_hole_fraction, contrast.sharp,
                       0.5 * contrast.threshold)
     return _Found(mask=mask, kind=PictureKind.PHOTO, **found)

@@ -291,7 +291,8 @@ def refine_edge(rgb: np.ndarray, background: np.ndarray, mask: np.ndarray, *,
     return refined
 
 
-def settle_edge(rgb: np.ndarray, background: np.ndarray, mask: np.ndarray) -> np.ndarray:
+def settle_edge(rgb: np.ndarray, background: np.ndarray, mask: np.ndarray,
+                smoothed: np.ndarray) -> np.ndarray:
     """(H, W) bool: the mask without the edge pixels that are more background than character.
 
     An edge pixel mixing both (optics, scaling) is the character's when it is more than half
@@ -300,18 +301,22 @@ def settle_edge(rgb: np.ndarray, background: np.ndarray, mask: np.ndarray) -> np
     photos shrunk 2x, area 0.5 % too large; with the first pass 0.3 % too small, IoU 0.9840
     -> 0.9855); on the smoothed copy it sees, a clean edge's halo reaches a second pixel out.
     Two passes: the first drops the edge pixels closer to the background field than to the
-    colour of the nearest pixel well inside the character; the second, on the new edge, only
+    inside colour (the smoothed picture at the nearest pixel well inside the character: one
+    pixel of fur or JPEG's ringing is no colour to measure against) and no farther from the
+    field than that inside colour is (a mix of the two never is: a pixel beyond it, a dark
+    stripe of fur reaching the edge, is the character's); the second, on the new edge, only
     those that are plainly a mix nearer the field's end: within THRESHOLD_FLOOR of the line
     from the field's colour to the inside colour, and less than half along it (a thin dark
     rim inside a light character is no such mix, and stays).
 
-    rgb : (H, W, 3) uint8; background : (H, W, 3) float32 (the field); mask : (H, W) bool."""
-    once = _settle_pass(rgb, background, mask, mix_only=False)
-    return _settle_pass(rgb, background, once, mix_only=True)
+    rgb : (H, W, 3) uint8; background : (H, W, 3) float32 (the field); mask : (H, W) bool;
+    smoothed : (H, W, 3) float32, the picture lightly smoothed (the residual's copy)."""
+    once = _settle_pass(rgb, background, mask, smoothed, mix_only=False)
+    return _settle_pass(rgb, background, once, smoothed, mix_only=True)
 
 
-def _settle_pass(rgb: np.ndarray, background: np.ndarray, mask: np.ndarray, *,
-                 mix_only: bool) -> np.ndarray:
+def _settle_pass(rgb: np.ndarray, background: np.ndarray, mask: np.ndarray,
+                 smoothed: np.ndarray, *, mix_only: bool) -> np.ndarray:
     """One pass of `settle_edge` over the mask's edge pixels (8-connected border)."""
     cv2 = require_cv2()
     square = np.ones((3, 3), np.uint8)
@@ -329,7 +334,7 @@ def _settle_pass(rgb: np.ndarray, background: np.ndarray, mask: np.ndarray, *,
     nearest = sources[labels[ys, xs] - 1]
     picture = rgb.astype(np.float32)
     colour = picture[ys, xs]
-    inside = picture.reshape(-1, 3)[nearest]
+    inside = smoothed.reshape(-1, 3)[nearest]
     field = background[ys, xs]
     if mix_only:
         # the mix fraction along field -> inside colour, and the distance off that segment
@@ -339,7 +344,9 @@ def _settle_pass(rgb: np.ndarray, background: np.ndarray, mask: np.ndarray, *,
         nearest_mix = field + np.clip(along, 0.0, 1.0)[:, None] * span
         drop = (along <= 0.5) & (np.linalg.norm(colour - nearest_mix, axis=1) <= THRESHOLD_FLOOR)
     else:
-        drop = np.linalg.norm(colour - field, axis=1) <= np.linalg.norm(colour - inside, axis=1)
+        to_field = np.linalg.norm(colour - field, axis=1)
+        drop = (to_field <= np.linalg.norm(colour - inside, axis=1)) & (
+            to_field <= np.linalg.norm(inside - field, axis=1))
     settled = mask.copy()
     settled[ys[drop], xs[drop]] = False
     return settled

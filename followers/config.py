@@ -172,13 +172,14 @@ class FollowerConfig(_Config):
         """A lone follower's settings for a chain: ``"speed"`` (the defaults), ``"mop"`` (the
         paper to the letter: no restart, no outlier cap, no pruning, fixed sigma, the state
         distribution's moments, unwidened) or ``"skip"`` (one state per frame, no tempo
-        scaling)."""
+        scaling, untempered: the tempering was chosen and measured on the speed chain)."""
         if transitions == "mop":
             return cls(transitions="mop", resolution=1, restart=0.0, outlier_sigmas=math.inf,
                        prune_mass=0.0, adapt_sigma=False, subframe=False, tempo_variance=False,
                        residual_cap=1.0, residual_temper=1.0)
         if transitions == "skip":
-            return cls(transitions="skip", resolution=1, tempo_variance=False)
+            return cls(transitions="skip", resolution=1, tempo_variance=False,
+                       residual_temper=1.0)
         return cls(transitions=transitions)
 
     @classmethod

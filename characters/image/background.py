@@ -530,7 +530,8 @@ def _find_character(rgb, kind, *, plain, tolerance, close_gaps, max_hole_fractio
     # a drawing's edge is measured on the picture itself: the noise blur widens thin lines
     ink = drawing.stroke_edges(contrast.foreground, contrast.sharp, contrast.threshold)
     if kind is PictureKind.DRAWING or (kind is PictureKind.AUTO
-                                       and drawing.is_line_drawing(main, ink)):
+                                       and drawing.is_line_drawing(
+                                           main, ink, max_hole_fraction=max_hole_fraction)):
         filled = drawing.fill_outline(ink, gap_limit=close_gaps)
         return _Found(mask=filled.mask, kind=PictureKind.DRAWING, drawing=filled, **found)
     if plain:

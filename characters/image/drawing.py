@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .background import fill_enclosed, largest_component, require_cv2
+from .background import fill_enclosed, fill_holes, largest_component, require_cv2
 
 HALF_PEAK_WINDOW = 7     # [px] the ink's local peak contrast is taken over this square
 GAP_WIDTHS = 3.0         # gaps up to this many stroke widths are closed ...
@@ -59,7 +59,8 @@ def figure_size(mask: np.ndarray) -> float:
     return float(max(xs.max() - xs.min(), ys.max() - ys.min()) + 1)
 
 
-def is_line_drawing(mask: np.ndarray, ink: np.ndarray | None = None) -> bool:
+def is_line_drawing(mask: np.ndarray, ink: np.ndarray | None = None, *,
+                    max_hole_fraction: float = 0.0) -> bool:
     """A figure drawn in lines (a pen drawing) rather than a solid shape (a photographed
     object, a coloured-in cartoon): what stands out is strokes thinner than THIN_FRACTION of
     the figure's size; or it is an outline: ink, out to its real edge, thinner than
@@ -69,11 +70,13 @@ def is_line_drawing(mask: np.ndarray, ink: np.ndarray | None = None) -> bool:
     solid colour, as wide as the figure.
 
     mask : (H, W) bool, what stands out (one piece); ink : (H, W) bool, the strokes out to
-    their real edge (`stroke_edges`)."""
+    their real edge (`stroke_edges`); max_hole_fraction: the mask's holes smaller than this
+    fraction of its area do not count as its edge (the speckle of a textured photograph
+    would make it look thin; the paper inside an outline is much larger)."""
     size = figure_size(mask)
     if size == 0:
         return False
-    if stroke_width(mask) < THIN_FRACTION * size:
+    if stroke_width(fill_holes(mask, max_hole_fraction)) < THIN_FRACTION * size:
         return True
     if ink is None:
         return False

@@ -205,7 +205,7 @@ def shadow_pixels(segmentation: LitSegmentation) -> tuple[np.ndarray, np.ndarray
     shadow: the field's colour direction (chromaticity), darker by a factor in
     [SHADOW_DARKEST, 1), and smooth (no texture beyond the background's noise). shadows: the
     foreground pixels among them, without thin dark lines (pencil strokes): a shadow is as
-    wide as several of them, or joined to such a wide shadow and to the lit background."""
+    wide as several of them and fades into the lit background, or is joined to such a shadow."""
     cv2 = require_cv2()
     # JPEG keeps colour at a quarter of the resolution: judge the hue on a smoother copy
     picture = cv2.GaussianBlur(segmentation.smoothed, (0, 0), 1.5)
@@ -224,27 +224,43 @@ def shadow_pixels(segmentation: LitSegmentation) -> tuple[np.ndarray, np.ndarray
     kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (size, size))
     region = shaded & segmentation.foreground
     wide = cv2.morphologyEx(region.astype(np.uint8), cv2.MORPH_OPEN, kernel) > 0
-    return wide | _thin_ends(wide, region, segmentation.foreground), shaded
+    cast = _cast(wide, segmentation.foreground, segmentation.residual)
+    return cast | _thin_ends(cast, region), shaded
 
 
-def _thin_ends(wide: np.ndarray, region: np.ndarray, foreground: np.ndarray) -> np.ndarray:
-    """(H, W) bool: the parts of `region` (shaded and standing out) that the opening cut off
-    a wide shadow: its thin ends, such as the tip of a pocket between two limbs. They are
-    shadow when joined to a wide shadow that itself touches the lit background (a cast
-    shadow's soft edge fades into it), which a darker, greyer patch inside the character
-    (grass, a black seat on a grey backdrop) does not: joined to its speckled surroundings it
-    would carry the shadow far into the character."""
+def _cast(wide: np.ndarray, foreground: np.ndarray, residual: np.ndarray) -> np.ndarray:
+    """(H, W) bool: the wide shadow-like parts that fade into the lit background. A shadow
+    cast on the backdrop touches it, and where it does it is less than half as dark as it is
+    overall (its soft edge; residual (H, W) float, the distance to the field). A dark, grey,
+    smooth part of the character is enclosed by the rest of it (dark bricks between light
+    mortar) or meets the backdrop at a sharp edge (the dark backdrop of a coin photograph
+    cut out on a grey one)."""
     cv2 = require_cv2()
     if not wide.any():
         return wide
     lit = cv2.dilate((~foreground).astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
     count, parts = cv2.connectedComponents(wide.astype(np.uint8), connectivity=8)
-    cast = np.bincount(parts[lit & wide], minlength=count) > 0
-    cast[0] = False
+    cast = np.zeros(count, bool)
+    edge = lit & wide
+    for label in np.unique(parts[edge]):
+        part = parts == label
+        cast[label] = np.median(residual[edge & part]) <= 0.5 * np.median(residual[part])
+    return cast[parts]
+
+
+def _thin_ends(cast: np.ndarray, region: np.ndarray) -> np.ndarray:
+    """(H, W) bool: the parts of `region` (shaded and standing out) that the opening cut off
+    a cast shadow: its thin ends, such as the tip of a pocket between two limbs. A darker,
+    greyer patch inside the character (grass, a black seat on a grey backdrop) is joined to
+    no cast shadow: joined to its speckled surroundings it would carry the shadow far into
+    the character."""
+    cv2 = require_cv2()
+    if not cast.any():
+        return cast
     count, labels = cv2.connectedComponents(region.astype(np.uint8), connectivity=8)
-    keep = np.bincount(labels[cast[parts]], minlength=count) > 0
+    keep = np.bincount(labels[cast], minlength=count) > 0
     keep[0] = False
-    return keep[labels] & ~wide
+    return keep[labels] & ~cast
 
 
 def refine_edge(rgb: np.ndarray, background: np.ndarray, mask: np.ndarray, *,

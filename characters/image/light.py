@@ -22,6 +22,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy import ndimage
 
 from .background import require_cv2
 
@@ -242,9 +243,12 @@ def _cast(wide: np.ndarray, foreground: np.ndarray, residual: np.ndarray) -> np.
     count, parts = cv2.connectedComponents(wide.astype(np.uint8), connectivity=8)
     cast = np.zeros(count, bool)
     edge = lit & wide
-    for label in np.unique(parts[edge]):
-        part = parts == label
-        cast[label] = np.median(residual[edge & part]) <= 0.5 * np.median(residual[part])
+    touching = np.unique(parts[edge])
+    if touching.size:
+        at_edge = ndimage.median(residual, labels=np.where(edge, parts, 0), index=touching)
+        overall = ndimage.median(residual, labels=parts, index=touching)
+        cast[touching] = np.asarray(at_edge) <= 0.5 * np.asarray(overall)
+    cast[0] = False
     return cast[parts]
 
 

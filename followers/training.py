@@ -224,6 +224,6 @@ def train_follower(demonstrations, *, states: int | None = None, iterations: int
     a performer is followed from 0.4x to 2.5x of it."""
     trained = train_hmm(demonstrations, states=states, iterations=iterations)
     config = resolve_config(config, transitions, FollowerConfig.preset)
-    takes = [demonstrations] if isinstance(demonstrations, np.ndarray) else list(demonstrations)
-    combined = combine(takes, config=config, name="demonstrations", template=trained.means)
+    combined = combine(demonstrations, config=config, name="demonstrations",
+                       template=trained.means)
     return Follower(combined, window=window, transitions=transitions, config=config)

@@ -248,7 +248,6 @@ def _cast(wide: np.ndarray, foreground: np.ndarray, residual: np.ndarray) -> np.
         at_edge = ndimage.median(residual, labels=np.where(edge, parts, 0), index=touching)
         overall = ndimage.median(residual, labels=parts, index=touching)
         cast[touching] = np.asarray(at_edge) <= 0.5 * np.asarray(overall)
-    cast[0] = False
     return cast[parts]
 
 
@@ -352,8 +351,7 @@ def _settle_pass(rgb: np.ndarray, background: np.ndarray, mask: np.ndarray,
     ys, xs = np.nonzero(band)
     sources = np.flatnonzero(outside.ravel() == 0)   # label k is the k-th zero pixel, row-major
     nearest = sources[labels[ys, xs] - 1]
-    picture = rgb.astype(np.float32)
-    colour = picture[ys, xs]
+    colour = rgb[ys, xs].astype(np.float32)
     inside = smoothed.reshape(-1, 3)[nearest]
     field = background[ys, xs]
     if mix_only:

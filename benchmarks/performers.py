@@ -4,6 +4,7 @@
     python3 benchmarks/performers.py --quick    # fewer draws and recordings
     python3 benchmarks/performers.py --only recognition|calibration|rejection|intervals|still|timing
     python3 benchmarks/performers.py --only intervals --split train   # choosing: train takes
+    python3 benchmarks/performers.py --only recognition --split train  # W4, W3, B5
 
 Every protocol takes the demonstrations from a set's train split and the performances from
 its test split (other takes, other performers); every setting was chosen on train splits
@@ -14,6 +15,7 @@ Z acceleration, 1 channel, from the aeon wheel), BasicMotions (4 activities, 6 c
 from __future__ import annotations
 
 import argparse
+import itertools
 import math
 import os
 import sys
@@ -105,6 +107,22 @@ def recognised(bank, classes, performance, label):
     return [action[m] >= 0 and classes[action[m]] == label for m in marks_of(len(performance))]
 
 
+def decisions(demos, performances, classes, speeds=None, each_take=False):
+    """``recognised`` of every (take, label) in ``performances`` (at each of ``speeds``) by a
+    bank of ``demos``; ``each_take``: the comparison."""
+    bank, normaliser = bank_of(demos)
+    if each_take:
+        bank = EachTake(demos, normaliser)
+    rows = []
+    for x, label in performances:
+        for speed in speeds or (1.0,):
+            performance = normaliser(x)
+            if speeds:
+                performance = time_warp(performance, speed)[0]
+            rows.append(recognised(bank, classes, performance, label))
+    return rows
+
+
 def accuracy(data, k, draws, seed, speeds=None, each_take=False):
     """Accuracy [%] after 25 / 50 / 100 % of every test take, banks of k train takes per
     class (draws at random, or the first k with one draw); ``each_take``: the comparison."""
@@ -114,19 +132,35 @@ def accuracy(data, k, draws, seed, speeds=None, each_take=False):
     rows = []
     for _ in range(draws):
         demos = draw(X, y, classes, k, rng if draws > 1 else None)
-        bank, normaliser = bank_of(demos)
-        if each_take:
-            bank = EachTake(demos, normaliser)
-        for x, label in zip(Xt, yt):
-            for speed in speeds or (1.0,):
-                performance = normaliser(x)
-                if speeds:
-                    performance = time_warp(performance, speed)[0]
-                rows.append(recognised(bank, classes, performance, label))
+        rows += decisions(demos, list(zip(Xt, yt)), classes, speeds, each_take)
+    return 100 * np.mean(rows, axis=0)
+
+
+def train_accuracy(data, k, draws=None, seed=0, speeds=None, each_take=False):
+    """As ``accuracy`` on the train split alone: k train takes per class as the
+    demonstrations, the class's other train takes as the performances; every choice of k
+    takes (``draws`` None) or ``draws`` at random."""
+    X, y = data[:2]
+    classes = classes_of(y)
+    index = {c: np.flatnonzero(y == c) for c in classes}
+    if draws is None:
+        n = min(len(i) for i in index.values())
+        splits = [{c: index[c][list(p) + [i for i in range(n) if i not in p]]
+                   for c in classes} for p in itertools.combinations(range(n), k)]
+    else:
+        rng = np.random.default_rng(seed)
+        splits = [{c: rng.permutation(index[c]) for c in classes} for _ in range(draws)]
+    rows = []
+    for order in splits:
+        demos = {c: [X[i] for i in order[c][:k]] for c in classes}
+        performances = [(X[i], c) for c in classes for i in order[c][k:]]
+        rows += decisions(demos, performances, classes, speeds, each_take)
     return 100 * np.mean(rows, axis=0)
 
 
 def recognition(args):
+    if args.split == "train":
+        return train_recognition()
     say("\n== recognition across performers: k train takes per action, every test take ==")
     w, b = wiimote(), basic_motions()
     rows = [("PickupGestureWiimoteZ, 5 takes per action", accuracy(w, 5, 1, 0), (65, 80, 80)),
@@ -140,6 +174,19 @@ def recognition(args):
         say(f"  {label:<56} {got[0]:5.1f} / {got[1]:5.1f} / {got[2]:5.1f} %  (target >= "
             f"{target[0]} / {target[1]} / {target[2]}: "
             f"{verdict(all(g >= t for g, t in zip(got, target)))})")
+
+
+def train_recognition():
+    say("\n== recognition, train takes alone (for choosing): k train takes per action, the "
+        "action's other train takes as the performances ==")
+    w, b = wiimote(), basic_motions()
+    rows = [("W4: Wiimote, 4 takes per action, every choice of 4", train_accuracy(w, 4)),
+            ("  the same takes, each its own template", train_accuracy(w, 4, each_take=True)),
+            ("W3: Wiimote, 3 takes per action, every choice of 3", train_accuracy(w, 3)),
+            ("B5: BasicMotions, 5 takes, the other 5 at 0.5/1/2x, 2 draws",
+             train_accuracy(b, 5, 2, 2, SPEEDS))]
+    for label, got in rows:
+        say(f"  {label:<60} {got[0]:5.1f} / {got[1]:5.1f} / {got[2]:5.1f} %")
 
 
 def calibration_take(rest, takes, rate):
@@ -402,7 +449,8 @@ def main():
     parser.add_argument("--only", choices=("recognition", "calibration", "rejection",
                                            "intervals", "still", "timing"), default=None)
     parser.add_argument("--split", choices=("train", "test"), default="test",
-                        help="the takes the intervals are measured on (train: while choosing)")
+                        help="the takes recognition and intervals are measured on (train: "
+                             "while choosing)")
     args = parser.parse_args()
     for name, section in (("timing", timing), ("recognition", recognition),
                           ("calibration", calibration),

@@ -26,6 +26,7 @@ from followers.defaults import as_sigma, as_window, default_window
 from followers.demos import Demonstrations, combine
 from followers.follower import Follower, adaptation, chain, resolve_config
 from followers.model import build_forward, check_frame, forward_state, reset_forward
+from followers.novelty import build_novelty, novelty, novelty_trace
 from followers.intervals import (interval_state, reset_interval, stacked, widen,
                                  widen_arguments)
 from followers.still import RELEASE, StillState, StillWindow, build_still, judge, still_mask
@@ -170,6 +171,8 @@ class FollowerBank:
         self._bank = bank_state(self._model)
         self._kernels = self._widen_args = None  # per-frame kernels (``_entries``)
         self._out = BankOutput(self)
+        self._fit_sum, self._fit_frames = np.zeros(K), np.zeros(1)
+        self._novelty = build_novelty([[self._run(t).fits for t in a.takes] for a in actions])
         self.reset()
         if K >= _PROBED[0] or sum(a.size for a in arrays) >= _PROBED[1]:
             self._probe()
@@ -275,6 +278,15 @@ class FollowerBank:
         [nats per channel per frame]."""
         return self._bank.fit
 
+    @property
+    def novelty(self) -> float:
+        """How unlike every action's own demonstrations the input since reset is
+        (``followers.novelty``): about 1 for a take like them, large for an unrecorded action;
+        nan before the first frame or when no action has two takes."""
+        if not self._fit_frames[0]:
+            return float("nan")
+        return novelty(self._novelty, self._fit_sum / self._fit_frames[0])
+
     # ---- running --------------------------------------------------------------------------------
     def reset(self) -> None:
         """Forget everything: the next frame is the first of a performance."""
@@ -286,6 +298,8 @@ class FollowerBank:
         self._still_window.reset()
         self._still_state.reset()
         reset_interval(self._interval_state)
+        self._fit_sum[:] = 0.0
+        self._fit_frames[0] = 0.0
         self._publish()
 
     def step(self, x) -> BankOutput:
@@ -298,6 +312,8 @@ class FollowerBank:
         row = args[4]  # the frame, a view made once
         row[:] = check_frame(x, row.shape[0])
         step(*args)
+        self._fit_sum += self._bank.fit
+        self._fit_frames[0] += 1.0
         self._still_window.push(row)
         self._shown[0] = self._publish(judged=True)
         self._shown_progress[0] = self._out.progress
@@ -355,15 +371,15 @@ class FollowerBank:
     def follow(self, X) -> dict[str, np.ndarray]:
         """Step through ``X (N, D)`` from a fresh start; returns arrays for plotting:
         ``action`` (N,) int (-1: none), ``progress``/``variance`` (N,) of the shown action,
-        ``progresses``, ``posteriors``, ``log_likelihoods``, ``fits`` each (N, K)."""
+        ``progresses``, ``posteriors``, ``log_likelihoods``, ``fits`` each (N, K), and
+        ``novelty`` (N,): ``novelty`` after each frame."""
         arr = np.asarray(X, dtype=np.float64)
         if arr.ndim != 2 or arr.shape[1] != self.channels:
             raise ValueError(f"X must be (N, {self.channels}), got shape {arr.shape}")
-        trace = BankTrace.empty(arr.shape[0], len(self._names))
-        self.reset()
         arr = np.ascontiguousarray(arr)
-        _bank_kernels.bank_run(self._forward.model, self._state, self._model, self._bank, arr,
-                               trace)
+        trace = self._run(arr)
+        self._fit_sum[:] = trace.fits.sum(axis=0)
+        self._fit_frames[0] = arr.shape[0]
         shown = np.where(trace.action >= 0, trace.action, np.argmax(trace.posteriors, axis=1))
         self._widen(arr, shown, trace.progress, trace.variance)
         self._judge_still(arr, trace)
@@ -371,7 +387,15 @@ class FollowerBank:
         self._publish(quiet=bool(arr.shape[0]) and trace.action[-1] < 0)
         if arr.shape[0]:
             self._out.variance = float(trace.variance[-1])
-        return trace._asdict()
+        return {**trace._asdict(), "novelty": novelty_trace(self._novelty, trace.fits)}
+
+    def _run(self, X) -> BankTrace:
+        """The kernels' trace of ``X (N, D)`` (contiguous float) from a fresh start."""
+        trace = BankTrace.empty(X.shape[0], len(self._names))
+        self.reset()
+        _bank_kernels.bank_run(self._forward.model, self._state, self._model, self._bank,
+                               np.ascontiguousarray(X, dtype=np.float64), trace)
+        return trace
 
     def _judge_still(self, X, trace) -> None:
         """The still stage over a traced performance ``X (N, D)``: ``trace.action`` set to -1

@@ -172,7 +172,10 @@ class FollowerBank:
         self._kernels = self._widen_args = None  # per-frame kernels (``_entries``)
         self._out = BankOutput(self)
         self._fit_sum, self._fit_frames = np.zeros(K), np.zeros(1)
-        self._novelty = build_novelty([[self._run(t).fits for t in a.takes] for a in actions])
+        self._novelty = None     # undefined unless an action has two takes (no spread)
+        if any(len(a.takes) > 1 for a in actions):
+            self._novelty = build_novelty([[self._run(t).fits for t in a.takes]
+                                           for a in actions])
         self.reset()
         if K >= _PROBED[0] or sum(a.size for a in arrays) >= _PROBED[1]:
             self._probe()
@@ -283,7 +286,7 @@ class FollowerBank:
         """How unlike every action's own demonstrations the input since reset is
         (``followers.novelty``): about 1 for a take like them, large for an unrecorded action;
         nan before the first frame or when no action has two takes."""
-        if not self._fit_frames[0]:
+        if not self._fit_frames[0] or self._novelty is None:
             return float("nan")
         return novelty(self._novelty, self._fit_sum / self._fit_frames[0])
 
@@ -387,7 +390,9 @@ class FollowerBank:
         self._publish(quiet=bool(arr.shape[0]) and trace.action[-1] < 0)
         if arr.shape[0]:
             self._out.variance = float(trace.variance[-1])
-        return {**trace._asdict(), "novelty": novelty_trace(self._novelty, trace.fits)}
+        undefined = np.full(arr.shape[0], np.nan)
+        return {**trace._asdict(), "novelty": undefined if self._novelty is None
+                else novelty_trace(self._novelty, trace.fits)}
 
     def _run(self, X) -> BankTrace:
         """The kernels' trace of ``X (N, D)`` (contiguous float) from a fresh start."""

@@ -263,8 +263,9 @@ def bench_accuracy(seeds: range) -> None:
     """Cut-out and automatic-pin accuracy on the pictures the tests build, over several seeds:
     photographs cut to silhouettes over backdrops lit 25-50 % unevenly (noise, JPEG 65-80),
     pen outlines on paper (vignette, noise, JPEG), a creature casting a soft shadow on its
-    backdrop, stars, stick figures and the horse. Both the photographs and outline shapes used
-    for tuning and those held out are reported."""
+    backdrop, textures on a grey backdrop of their own mean, stars, stick figures and the
+    horse. Both the photographs and outline shapes used for tuning and those held out are
+    reported."""
     import time
 
     from characters.image.background import remove_background
@@ -334,6 +335,18 @@ def bench_accuracy(seeds: range) -> None:
     print(f"  photos   other    n={len(other):3d}  IoU mean {other.mean():.4f}  min "
           f"{other.min():.4f}  >= 0.95: {(other >= 0.95).sum()} of {len(other)} "
           f"({len(kit.OTHER_PHOTOS)} more pictures, seeds 100-102)")
+    textured, warned = [], []
+    for name in kit.TEXTURES:
+        for seed in range(100, 103):
+            for _, picture, truth in kit.texture_on_its_mean(np.random.default_rng(seed), name):
+                cutout = remove_background(picture)
+                textured.append(kit.iou(cutout.mask, truth))
+                warned.append(any("may be wrong" in note for note in cutout.notes))
+    textured, warned = np.array(textured), np.array(warned)
+    print(f"  textures on grey of their mean n={len(textured)}  IoU mean {textured.mean():.4f}  "
+          f">= 0.95: {(textured >= 0.95).sum()}; said they may be wrong: {warned.sum()} "
+          f"(of the {(textured < 0.95).sum()} under 0.95: {warned[textured < 0.95].sum()}; "
+          f"{', '.join(kit.TEXTURES)}, seeds 100-102)")
     worst = {"star": 0.0, "stick figure": 0.0}
     for seed in seeds:
         rng = np.random.default_rng(seed)

@@ -27,6 +27,8 @@ HELD_OUT_OUTLINES = ("bear", "fish")
 OTHER_PHOTOS = ("camera", "immunohistochemistry", "moon", "coins", "clock", "hubble_deep_field",
                 "retina", "cell", "brick", "grass", "gravel")
 INK_NAMES = ("black", "blue", "red", "green", "brown", "violet")
+# greyscale textures: on a grey backdrop of their own mean only texture tells them apart
+TEXTURES = ("moon", "grass", "gravel")
 
 
 def photo(name: str) -> np.ndarray:
@@ -153,6 +155,17 @@ def photo_on_background(rng, picture: np.ndarray, mask: np.ndarray, *, colour, g
     composite = np.clip(np.round(composite), 0, 255).astype(np.uint8)
     return composite if quality is None else jpeg(composite, quality)
 
+
+def texture_on_its_mean(rng, name: str):
+    """(name of the silhouette, picture (H, W, 3) uint8, truth (H, W) bool) for each of the
+    three silhouettes: a texture of TEXTURES cut to it over a grey backdrop of the texture's
+    own mean, lit 25-50 % unevenly, noise and JPEG 65-80 as in the photo tests."""
+    picture = photo(name)
+    grey = np.full(3, picture.mean())
+    for shape, truth in silhouettes(rng, *picture.shape[:2]):
+        yield shape, photo_on_background(
+            rng, picture, truth, colour=grey, gradient=rng.uniform(0.25, 0.5),
+            noise=rng.uniform(3, 8), quality=int(rng.integers(65, 81))), truth
 
 
 def shadow_case(rng, picture: np.ndarray, *, colour=(200, 190, 120)):

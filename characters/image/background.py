@@ -29,6 +29,8 @@ MAX_FIELD_NOISE = 12.0       # [0..255] a lit background this busy is a scene, n
 PLAIN_SPREAD = 10.0          # [0..255] a background this flat is keyed by one colour (plain)
 MIN_TRANSPARENT_FRACTION = 0.01   # an alpha channel outlines a character if this much is clear
 ANALYSIS_SIZE = 640          # [px] larger pictures are analysed on a copy this big
+TEXTURED_SHARE = 0.01        # a cut-out is doubtful when the textured pixels it left out
+                             # (light.textured_outside) are this share of its area
 
 
 def require_cv2():
@@ -318,6 +320,8 @@ def remove_background(image: np.ndarray, *, kind="auto", tolerance: float | None
                             min_character_fraction=min_character_fraction)
     notes += [_open_outline_note(found.drawing, scale)] if found.drawing is not None and \
         not found.drawing.closed else []
+    notes += [_textured_note(found)] if found.textured >= TEXTURED_SHARE * found.mask.sum() \
+        else []
     if scale == 1.0:
         mask = found.mask
         alpha = feather_alpha(mask, feather)
@@ -427,6 +431,7 @@ class _Found:
     background_colour: np.ndarray
     tolerance: float
     drawing: object = None     # drawing.FilledDrawing for a drawing
+    textured: int = 0          # [px] textured pixels left out (light.textured_outside)
 
 
 @dataclass(frozen=True)
@@ -523,6 +528,7 @@ def _find_character(rgb, kind, *, plain, tolerance, close_gaps, max_hole_fractio
     filled except the background's, and with the light field its edge refined (GrabCut)."""
     from . import drawing, light
     contrast = _plain_contrast(rgb, tolerance) if plain else _field_contrast(rgb, tolerance)
+    texture = None if contrast.smoothed is None else light.fine_texture(contrast.smoothed)
     main = largest_component(contrast.foreground)
     _character_check(main, min_character_fraction,
                      "give a picture where the character stands out from its background")
@@ -533,7 +539,13 @@ def _find_character(rgb, kind, *, plain, tolerance, close_gaps, max_hole_fractio
                                        and drawing.is_line_drawing(
                                            main, ink, max_hole_fraction=max_hole_fraction)):
         filled = drawing.fill_outline(ink, gap_limit=close_gaps)
-        return _Found(mask=filled.mask, kind=PictureKind.DRAWING, drawing=filled, **found)
+        # an open outline's puppet is its strokes, leaving out what is drawn inside
+        textured = _textured_count(texture if filled.closed else None, filled.mask)
+        # texture left out all round, where paper would be smooth: a textured photograph
+        # (grass on grey of its mean) taken for strokes, which the photo's cut finds
+        if kind is PictureKind.DRAWING or textured < TEXTURED_SHARE * filled.mask.sum():
+            return _Found(mask=filled.mask, kind=PictureKind.DRAWING, drawing=filled,
+                          textured=textured, **found)
     if plain:
         first = fill_holes(main, max_hole_fraction, contrast.sharp, 0.5 * contrast.threshold)
         return _Found(mask=first, kind=PictureKind.PLAIN, **found)
@@ -549,7 +561,27 @@ def _find_character(rgb, kind, *, plain, tolerance, close_gaps, max_hole_fractio
                                                   contrast.smoothed))
     mask = fill_holes(refined if refined.any() else first, max_hole_fraction, contrast.sharp,
                       0.5 * contrast.threshold)
-    return _Found(mask=mask, kind=PictureKind.PHOTO, **found)
+    return _Found(mask=mask, kind=PictureKind.PHOTO, textured=_textured_count(texture, mask),
+                  **found)
+
+
+def _textured_count(texture, mask) -> int:
+    """[px] the textured pixels a cut-out left out (0 without a light field's texture)."""
+    from . import light
+    return 0 if texture is None else int(light.textured_outside(texture, mask).sum())
+
+
+def _textured_note(found: _Found) -> str:
+    """What to tell a user whose cut-out left out much that is textured unlike the backdrop."""
+    area = int(found.mask.sum())
+    ratio = found.textured / max(area, 1)
+    amount = f"{ratio:.1f} times" if ratio >= 1 else f"{100 * ratio:.0f}% of"
+    return (f"the cut-out may be wrong: it is {100 * area / found.mask.size:.1f}% of the "
+            f"picture, and away from its edge it left out parts textured unlike the backdrop "
+            f"at the picture's border, {amount} its area: a character of the backdrop's colour "
+            f"that differs from it only by its texture (grass, gravel, the moon on grey) is not "
+            f"told apart by colour; photograph it on a backdrop of another colour, or give a "
+            f"picture with an alpha channel")
 
 
 def _open_outline_note(filled, scale: float) -> str:

@@ -40,6 +40,11 @@ GRABCUT_SEED = 1           # OpenCV's random generator, reset before each GrabCu
 SHADOW_DARKEST = 0.35      # a shadow keeps at least this fraction of the background's light
 SHADOW_HUE = 0.06          # and its colour's direction within this (chromaticity distance)
 SHADOW_TEXTURE = 3.0       # and is as smooth as the background: within 3 x its noise
+TEXTURE_SCALE = 2.0        # [px] a pixel's texture: its detail finer than this ...
+TEXTURE_WINDOW = 9         # [px] ... averaged over this square (a character's own edge
+                           # reaches this far out into it)
+TEXTURE_MULTIPLE = 6.0     # textured: over this x the backdrop's texture at the border ...
+TEXTURE_FLOOR = 0.25       # ... taken as at least this [0..255] (a noiseless picture)
 
 
 def polynomial_terms(u: np.ndarray, v: np.ndarray, degree: int) -> np.ndarray:
@@ -189,6 +194,37 @@ def weak_foreground(segmentation: LitSegmentation) -> np.ndarray:
     part of it when joined to what stands out (hysteresis)."""
     level = max(WEAK_FLOOR, WEAK_MULTIPLE * segmentation.field.noise)
     return segmentation.residual > min(level, segmentation.field.threshold)
+
+
+def fine_texture(smoothed: np.ndarray) -> np.ndarray:
+    """(H, W) float32 [0..255]: each pixel's texture, the picture's detail finer than
+    TEXTURE_SCALE (its distance to a copy blurred that much) averaged over TEXTURE_WINDOW.
+    A cast shadow, uneven light and a backdrop's noise (already smoothed) have little of it;
+    grass, gravel and the moon's craters have several times the backdrop's.
+
+    smoothed : (H, W, 3) float32, the picture lightly smoothed (the residual's copy)."""
+    cv2 = require_cv2()
+    detail = colour_distance(smoothed, cv2.GaussianBlur(smoothed, (0, 0), TEXTURE_SCALE))
+    return cv2.blur(detail, (TEXTURE_WINDOW, TEXTURE_WINDOW))
+
+
+def textured_outside(texture: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """(H, W) bool: the pixels left out of the mask, farther than TEXTURE_WINDOW from it,
+    textured over TEXTURE_MULTIPLE x the backdrop's own texture (its median in the border
+    band, away from the mask). A character coloured like its backdrop and told apart only by
+    its texture (grass on grey of its mean) is what a colour cut leaves there.
+
+    texture : (H, W) float32 (`fine_texture`); mask : (H, W) bool, the cut-out."""
+    cv2 = require_cv2()
+    reach = 2 * TEXTURE_WINDOW + 1
+    disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (reach, reach))
+    outside = cv2.dilate(mask.astype(np.uint8), disc) == 0
+    if not outside.any():
+        return outside
+    border = outside & border_band(*mask.shape)
+    backdrop = texture[border] if border.sum() >= 64 else texture[outside]
+    level = TEXTURE_MULTIPLE * max(float(np.median(backdrop)), TEXTURE_FLOOR)
+    return outside & (texture > level)
 
 
 def grow_into(mask: np.ndarray, weak: np.ndarray) -> np.ndarray:

@@ -275,3 +275,21 @@ def test_unreadable_and_odd_files_say_what_is_wrong(tmp_path):
     (tmp_path / "cut.jpg").write_bytes(buffer.getvalue()[: len(buffer.getvalue()) // 3])
     with pytest.raises(ValueError, match="cut.jpg"):
         load_image(tmp_path / "cut.jpg")
+
+
+@pytest.mark.realdata
+def test_mop_puppet_prints_a_doubtful_cut_outs_note_once(rng, tmp_path):
+    """`mop puppet` on the moon on grey of its mean: the note is printed once, after what was
+    built (the library's warning line of it is not repeated on stderr)."""
+    import subprocess
+    import sys
+    _, picture, _ = next(kit.texture_on_its_mean(rng, "moon"))
+    path = tmp_path / "moon.png"
+    cv2.imwrite(str(path), picture[:, :, ::-1])
+    done = subprocess.run([sys.executable, "-m", "mop", "puppet", str(path), "--show-mesh",
+                           str(tmp_path / "mesh.png")], capture_output=True, text=True,
+                          timeout=300, cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    said = done.stdout + done.stderr
+    assert said.count("the cut-out may be wrong") == 1, said
+    assert "note: the cut-out may be wrong" in done.stdout

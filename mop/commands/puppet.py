@@ -12,6 +12,7 @@ picture pixels over time (characters.Motion JSON).
 """
 from __future__ import annotations
 
+import logging
 import sys
 import time
 from pathlib import Path
@@ -139,10 +140,17 @@ def _build(args, pins):
     from characters import ImagePuppet
 
     started = time.perf_counter()
-    puppet = ImagePuppet.from_image(args.image, cell_size=args.cell_size,
-                                    tolerance=args.tolerance, material=args.material,
-                                    mode=args.mode, kind=args.kind,
-                                    close_gaps=args.close_gaps)
+    # the notes are printed below, once: the library's warning line of each would repeat them
+    library = logging.getLogger("characters.image.puppet")
+    level = library.level
+    library.setLevel(logging.ERROR)
+    try:
+        puppet = ImagePuppet.from_image(args.image, cell_size=args.cell_size,
+                                        tolerance=args.tolerance, material=args.material,
+                                        mode=args.mode, kind=args.kind,
+                                        close_gaps=args.close_gaps)
+    finally:
+        library.setLevel(level)
     for name, pin in (pins or {}).items():
         puppet.add_pin(pin["xy"], name=name, fixed=pin["fixed"])
     proposed = pins is None and (args.auto_pins or args.out is None)

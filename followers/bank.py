@@ -171,7 +171,7 @@ class FollowerBank:
         self._bank = bank_state(self._model)
         self._kernels = self._widen_args = None  # per-frame kernels (``_entries``)
         self._out = BankOutput(self)
-        self._fit_sum, self._fit_frames = np.zeros(K), np.zeros(1)
+        self._fit_sum, self._fit_frames = np.zeros(K), 0   # the fits since reset
         self._novelty = None     # undefined unless an action has two takes (no spread)
         if any(len(a.takes) > 1 for a in actions):
             self._novelty = build_novelty([[self._run(t).fits for t in a.takes]
@@ -286,9 +286,9 @@ class FollowerBank:
         """How unlike every action's own demonstrations the input since reset is
         (``followers.novelty``): about 1 for a take like them, large for an unrecorded action;
         nan before the first frame or when no action has two takes."""
-        if not self._fit_frames[0] or self._novelty is None:
+        if not self._fit_frames or self._novelty is None:
             return float("nan")
-        return novelty(self._novelty, self._fit_sum / self._fit_frames[0])
+        return novelty(self._novelty, self._fit_sum / self._fit_frames)
 
     # ---- running --------------------------------------------------------------------------------
     def reset(self) -> None:
@@ -302,7 +302,7 @@ class FollowerBank:
         self._still_state.reset()
         reset_interval(self._interval_state)
         self._fit_sum[:] = 0.0
-        self._fit_frames[0] = 0.0
+        self._fit_frames = 0
         self._publish()
 
     def step(self, x) -> BankOutput:
@@ -316,7 +316,7 @@ class FollowerBank:
         row[:] = check_frame(x, row.shape[0])
         step(*args)
         self._fit_sum += self._bank.fit
-        self._fit_frames[0] += 1.0
+        self._fit_frames += 1
         self._still_window.push(row)
         self._shown[0] = self._publish(judged=True)
         self._shown_progress[0] = self._out.progress
@@ -382,7 +382,7 @@ class FollowerBank:
         arr = np.ascontiguousarray(arr)
         trace = self._run(arr)
         self._fit_sum[:] = trace.fits.sum(axis=0)
-        self._fit_frames[0] = arr.shape[0]
+        self._fit_frames = arr.shape[0]
         shown = np.where(trace.action >= 0, trace.action, np.argmax(trace.posteriors, axis=1))
         self._widen(arr, shown, trace.progress, trace.variance)
         self._judge_still(arr, trace)
@@ -390,9 +390,9 @@ class FollowerBank:
         self._publish(quiet=bool(arr.shape[0]) and trace.action[-1] < 0)
         if arr.shape[0]:
             self._out.variance = float(trace.variance[-1])
-        undefined = np.full(arr.shape[0], np.nan)
-        return {**trace._asdict(), "novelty": undefined if self._novelty is None
-                else novelty_trace(self._novelty, trace.fits)}
+        novel = (np.full(arr.shape[0], np.nan) if self._novelty is None
+                 else novelty_trace(self._novelty, trace.fits))
+        return {**trace._asdict(), "novelty": novel}
 
     def _run(self, X) -> BankTrace:
         """The kernels' trace of ``X (N, D)`` (contiguous float) from a fresh start."""

@@ -46,14 +46,17 @@ def build_novelty(fits: list[list[np.ndarray]]) -> NoveltyModel:
 
 def novelty(model: NoveltyModel, mean_fit: np.ndarray) -> float:
     """The novelty of fits whose mean since reset is ``mean_fit (K,)``."""
-    distance = ((mean_fit[None, :] - model.profiles) / model.scale) ** 2
-    return float(distance.mean(axis=1).min())
+    return float(_nearest(model, mean_fit[None, :])[0])
 
 
 def novelty_trace(model: NoveltyModel, fits: np.ndarray) -> np.ndarray:
     """(N,) the novelty after each frame of a traced input's ``fits (N, K)``."""
-    if fits.shape[0] == 0:
-        return np.zeros(0)
     running = np.cumsum(fits, axis=0) / np.arange(1, fits.shape[0] + 1)[:, None]
-    distance = ((running[:, None, :] - model.profiles[None]) / model.scale) ** 2
+    return _nearest(model, running)
+
+
+def _nearest(model: NoveltyModel, means: np.ndarray) -> np.ndarray:
+    """(N,) each row of ``means (N, K)``: its mean squared distance, in the model's scale,
+    from the nearest action's profile."""
+    distance = ((means[:, None, :] - model.profiles[None]) / model.scale) ** 2
     return distance.mean(axis=2).min(axis=1)

@@ -320,8 +320,7 @@ def remove_background(image: np.ndarray, *, kind="auto", tolerance: float | None
                             min_character_fraction=min_character_fraction)
     notes += [_open_outline_note(found.drawing, scale)] if found.drawing is not None and \
         not found.drawing.closed else []
-    notes += [_textured_note(found)] if found.textured >= TEXTURED_SHARE * found.mask.sum() \
-        else []
+    notes += [_textured_note(found)] if _doubtful(found.textured, found.mask) else []
     if scale == 1.0:
         mask = found.mask
         alpha = feather_alpha(mask, feather)
@@ -543,7 +542,7 @@ def _find_character(rgb, kind, *, plain, tolerance, close_gaps, max_hole_fractio
         textured = _textured_count(texture if filled.closed else None, filled.mask)
         # texture left out all round, where paper would be smooth: a textured photograph
         # (grass on grey of its mean) taken for strokes, which the photo's cut finds
-        if kind is PictureKind.DRAWING or textured < TEXTURED_SHARE * filled.mask.sum():
+        if kind is PictureKind.DRAWING or not _doubtful(textured, filled.mask):
             return _Found(mask=filled.mask, kind=PictureKind.DRAWING, drawing=filled,
                           textured=textured, **found)
     if plain:
@@ -569,6 +568,11 @@ def _textured_count(texture, mask) -> int:
     """[px] the textured pixels a cut-out left out (0 without a light field's texture)."""
     from . import light
     return 0 if texture is None else int(light.textured_outside(texture, mask).sum())
+
+
+def _doubtful(textured: int, mask: np.ndarray) -> bool:
+    """A cut-out is doubtful when the textured pixels it left out are TEXTURED_SHARE of it."""
+    return textured >= TEXTURED_SHARE * mask.sum()
 
 
 def _textured_note(found: _Found) -> str:

@@ -87,7 +87,9 @@ def open_jaw(image, *, mouth, chin, corners, cheeks, opening):
     jaw-wide shift at the chin and fades out down the neck.
 
     mouth : (x, y) [px] the lips' meeting point; chin : y [px]; corners : (x_right, x_left)
-    mouth corners; cheeks : (x_right, x_left) the face's sides."""
+    mouth corners; cheeks : (x_right, x_left) the face's sides. The mouth is dark red, dark
+    grey in a picture without colour (the face mesh reads a red mouth in a grey face as lips:
+    on greyscale portraits jaw_open then stalls or falls as the mouth opens)."""
     import cv2
     height, width = image.shape[:2]
     ys, xs = np.mgrid[0:height, 0:width].astype(np.float32)
@@ -110,6 +112,9 @@ def open_jaw(image, *, mouth, chin, corners, cheeks, opening):
     edge = np.clip(np.minimum(below, gap - below), 0, 1.5) / 1.5
     alpha = (inside * edge)[..., None]
     dark = np.array([35, 25, 70], np.float32)        # BGR: the inside of a mouth
+    lower = image[int(my):int(chin), max(int(cheeks[0]), 0):int(cheeks[1])].astype(np.int16)
+    if np.ptp(lower, axis=2).mean() < 4:             # a greyscale picture: a grey mouth
+        dark[:] = dark @ np.float32([0.114, 0.587, 0.299])
     return (warped * (1 - alpha) + dark * alpha).astype(np.uint8)
 
 

@@ -154,13 +154,19 @@ def assert_jaw_opens(tmp_path, photo):
     assert np.ptp(values[:, FACE["head_roll"]]) < 3.0
 
 
+def card_over(picture, points, top=None):
+    """A copy of the picture with a grey card over the face's landmarks (10 px beyond them),
+    from `top` [px] down when given."""
+    covered = picture.copy()
+    (x0, y0), (x1, y1) = points.min(axis=0).astype(int) - 10, points.max(axis=0).astype(int) + 10
+    y0 = max(y0, 0) if top is None else int(top)
+    covered[y0:y1, max(x0, 0):x1] = (90, 90, 90)
+    return covered
+
+
 def test_covered_or_absent_face_is_nan_and_not_seen_then_found_again(tmp_path, photo):
     still = place(photo, placement(photo))
-    points = face_points(still)
-    covered = still.copy()
-    x0, y0 = points.min(axis=0).astype(int) - 10
-    x1, y1 = points.max(axis=0).astype(int) + 10
-    covered[max(y0, 0):y1, max(x0, 0):x1] = (90, 90, 90)      # a grey card over the face
+    covered = card_over(still, face_points(still))            # a grey card over the face
     empty = np.full((H, W, 3), (90, 100, 110), np.uint8)       # no one there
     back = place(photo, placement(photo, dx=-60, dy=20))       # back, somewhere else
     frames = [still] * 4 + [covered] * 10 + [empty] * 10 + [back] * 4
@@ -193,11 +199,8 @@ def test_a_card_over_a_close_face_is_nan_from_its_first_frame_one_over_the_mouth
     # every frame on some portraits)
     still = place(photo, placement(photo, scale=1.6))
     points = face_points(still)
-    (x0, y0), (x1, y1) = points.min(axis=0).astype(int) - 10, points.max(axis=0).astype(int) + 10
-    covered = still.copy()
-    covered[max(y0, 0):y1, max(x0, 0):x1] = (90, 90, 90)
-    mouth = still.copy()                                      # from the nose down
-    mouth[int(points[2, 1]):y1, max(x0, 0):x1] = (90, 90, 90)
+    covered = card_over(still, points)
+    mouth = card_over(still, points, top=points[2, 1])       # from the nose down
     values = track(tmp_path, [still] * 4 + [covered] * 6 + [still] * 4 + [mouth] * 6)
     assert np.isnan(values[4:10]).all()
     assert np.isfinite(values[:4]).all() and np.isfinite(values[10:]).all()

@@ -15,7 +15,6 @@ astronaut and matplotlib's Grace Hopper, each a face and an upper body.
 - One Euro smoothing on a noisy picture; `mop record` from a camera; the demo's glove performer
   given `camera:...:hands`; the shipped webcam session's takes followed.
 """
-import importlib.util
 import math
 import re
 from pathlib import Path
@@ -30,27 +29,13 @@ pytest.importorskip("skimage.data", reason="the astronaut photograph comes with 
 from capture import Status, open_source  # noqa: E402
 from capture.camera.landmarks import (FACE_CHANNELS, HAND_CHANNELS,  # noqa: E402
                                       POSE_CHANNELS)
+from camera_pictures import (ROOT, H, W, card_over, pictures, place,  # noqa: E402
+                             placement, track, write_video)
 
 pytestmark = [pytest.mark.realdata, pytest.mark.slow]   # videos through MediaPipe: minutes
 
-ROOT = Path(__file__).resolve().parent.parent
-W, H = 640, 480
 FACE = {name: k for k, name in enumerate(FACE_CHANNELS)}
-
-
-def _load_pictures():
-    """The picture making of the webcam example's takes (recordings/make_webcam_takes.py):
-    the photo's placement, the jaw warp, lossless video writing."""
-    path = ROOT / "recordings" / "make_webcam_takes.py"
-    spec = importlib.util.spec_from_file_location("make_webcam_takes", path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
-pictures = _load_pictures()
-astronaut, placement, place = pictures.astronaut, pictures.placement, pictures.place
-write_video, face_points, jaw_warp = pictures.write_video, pictures.face_points, pictures.jaw_warp
+astronaut, face_points, jaw_warp = pictures.astronaut, pictures.face_points, pictures.jaw_warp
 
 
 def webcam_video(path, frames, fps=30.0):
@@ -79,15 +64,6 @@ PHOTOS = {"astronaut": astronaut, "grace_hopper": grace_hopper}
 @pytest.fixture(scope="module", params=sorted(PHOTOS))
 def photo(request):
     return PHOTOS[request.param]()
-
-
-def track(tmp_path, frames, tracker="face", **options):
-    """Write the frames as a lossless video, read it back through the camera source."""
-    path = write_video(tmp_path / f"{tracker}.mkv", frames)
-    with open_source(f"camera:{path}:{tracker}", realtime=False, **options) as source:
-        values = np.array([frame.values for frame in source])
-        assert source.ended and values.shape == (len(frames), len(source.channels))
-    return values
 
 
 def test_head_roll_follows_an_in_plane_rotation_within_3_degrees(tmp_path, photo):
@@ -152,16 +128,6 @@ def assert_jaw_opens(tmp_path, photo):
     # the inner lips part by 0.3 eye spans more: jaw_open (full at 0.45 spans) rises by ~0.67
     assert steps[-1] - steps[0] > 0.4
     assert np.ptp(values[:, FACE["head_roll"]]) < 3.0
-
-
-def card_over(picture, points, top=None):
-    """A copy of the picture with a grey card over the face's landmarks (10 px beyond them),
-    from `top` [px] down when given."""
-    covered = picture.copy()
-    (x0, y0), (x1, y1) = points.min(axis=0).astype(int) - 10, points.max(axis=0).astype(int) + 10
-    y0 = max(y0, 0) if top is None else int(top)
-    covered[y0:y1, max(x0, 0):x1] = (90, 90, 90)
-    return covered
 
 
 def test_covered_or_absent_face_is_nan_and_not_seen_then_found_again(tmp_path, photo):

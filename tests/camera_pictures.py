@@ -27,6 +27,13 @@ pictures = _load_pictures()
 placement, place, write_video = pictures.placement, pictures.place, pictures.write_video
 
 
+def carried(first, matrices):
+    """(N, 2) [px] where a point seen at `first` [px] in the picture placed by matrices[0] is in
+    the picture placed by each matrix."""
+    in_photo = np.linalg.solve(matrices[0][:, :2], np.asarray(first) - matrices[0][:, 2])
+    return np.array([m[:, :2] @ in_photo + m[:, 2] for m in matrices])
+
+
 def track(tmp_path, frames, tracker="face", **options):
     """Write the frames as a lossless video, read it back through the camera source."""
     path = write_video(tmp_path / f"{tracker}.mkv", frames)

@@ -29,8 +29,8 @@ pytest.importorskip("skimage.data", reason="the astronaut photograph comes with 
 from capture import Status, open_source  # noqa: E402
 from capture.camera.landmarks import (FACE_CHANNELS, HAND_CHANNELS,  # noqa: E402
                                       POSE_CHANNELS)
-from camera_pictures import (ROOT, H, W, card_over, pictures, place,  # noqa: E402
-                             placement, track, write_video)
+from camera_pictures import (ROOT, H, W, card_over, carried, pictures,  # noqa: E402
+                             place, placement, track, write_video)
 
 pytestmark = [pytest.mark.realdata, pytest.mark.slow]   # videos through MediaPipe: minutes
 
@@ -91,8 +91,7 @@ def test_head_position_and_scale_follow_translation_and_scale(tmp_path, photo):
     assert np.isfinite(values).all()
     # where the tracker puts the head in the first frames, carried by each known placement
     first = np.array([values[:3, FACE["head_x"]].mean() * W, values[:3, FACE["head_y"]].mean() * H])
-    in_photo = np.linalg.solve(matrices[0][:, :2], first - matrices[0][:, 2])
-    expected = np.array([m[:, :2] @ in_photo + m[:, 2] for m in matrices])
+    expected = carried(first, matrices)
     found = np.c_[values[:, FACE["head_x"]] * W, values[:, FACE["head_y"]] * H]
     error = np.linalg.norm(found - expected, axis=1)
     assert error.max() < 4.0                                  # [px]; measured <= 1.4
@@ -188,8 +187,7 @@ def test_a_face_far_from_the_camera_is_found_in_a_window_and_measured(tmp_path, 
     assert (small[:, FACE["head_scale"]] < 0.1).all()         # face width / frame width
     # position and size against the known placements, as for a near face
     first = np.array([values[:3, FACE["head_x"]].mean() * W, values[:3, FACE["head_y"]].mean() * H])
-    in_photo = np.linalg.solve(matrices[0][:, :2], first - matrices[0][:, 2])
-    expected = np.array([m[:, :2] @ in_photo + m[:, 2] for m in matrices[3:]])
+    expected = carried(first, matrices)[3:]
     found = np.c_[small[:, FACE["head_x"]] * W, small[:, FACE["head_y"]] * H]
     assert np.linalg.norm(found - expected, axis=1).max() < 3.0           # [px]
     scale = np.array([s for _, _, s in far])

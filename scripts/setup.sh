@@ -2,7 +2,8 @@
 # Installs everything mop needs on a fresh Debian 12 / Python 3.11 machine, into ./.venv.
 #   bash scripts/setup.sh          the application (demo, capture with the face, hands and pose
 #                                  trackers, rendering)
-#   bash scripts/setup.sh --test   also what the test suite needs (umockdev, Chromium, test data)
+#   bash scripts/setup.sh --test   also what the test suite needs (umockdev, Chromium, test data,
+#                                  OpenCV's sample pictures)
 # System libraries come from apt-get (as root, or through sudo); Python packages from pip.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -15,7 +16,8 @@ apt_packages=(python3-venv python3-dev build-essential
 if [ "$want_tests" = 1 ]; then
     apt_packages+=(umockdev libumockdev-dev    # a HID device simulated in user space for end-to-end tests
                    libevdev2                   # loaded by hid-tools (the kernel's emulated gamepads)
-                   chromium chromium-driver)   # the live preview page, tested in a real browser
+                   chromium chromium-driver    # the live preview page, tested in a real browser
+                   opencv-doc)                 # real photographs of hands, for the hands tracker
 fi
 
 missing=()

@@ -12,6 +12,7 @@ pictures in Debian's `opencv-doc` (a test dependency: `scripts/setup.sh --test` 
   palm search's schedule (`search_every`);
 - a hand gripping a board (OpenCV's calibration picture right04) bends its middle and ring
   fingers more than the open hands.
+- a hand that jumps (the picture cut from one open hand to the other) is one hand, not two.
 The core assertions run with `model="full"` (the default) and `model="lite"`.
 """
 from pathlib import Path
@@ -216,3 +217,13 @@ def test_a_hand_gripping_a_board_bends_its_middle_fingers_more_than_an_open_hand
     # measured: gripping 0.67-0.68, open 0.20-0.33
     assert (middle_ring[0] - middle_ring[1:] > 0.2).all(), middle_ring
 
+
+def test_a_hand_that_jumps_is_not_counted_twice(tmp_path):
+    # the picture cut from one open hand to the other, in about the same place: the palm search
+    # finds the new hand while the tracking from the last frame still reads one in its old box
+    # (the graph keeps both when the boxes overlap too little); the two coincide, finger for
+    # finger, and MediaPipe calls both "Left": one hand, not a right hand besides it
+    frames = [place(photograph(name), placement(photograph(name))) for name in OPEN]
+    values = track(tmp_path, [frames[0]] * 3 + [frames[1]] * 3, tracker="hands")
+    assert np.isfinite(side_of(values, "left")).all()
+    assert np.isnan(side_of(values, "right")).all()

@@ -214,6 +214,24 @@ def test_hands_keep_their_sides():
     assert assign_sides([("right", 0.6, (0.32, 0.5))], last) == ["right"]
 
 
+def test_one_hand_found_twice_is_one_hand():
+    from capture.camera.markerless import one_per_hand
+    # 21 image points [px]: the wrist at the origin, the middle knuckle (9) 100 px up
+    hand = np.c_[np.tile(np.linspace(-40, 40, 5), 5)[:21] + 0.0,
+                 -np.repeat(np.linspace(0, 200, 5), 5)[:21]]
+    hand[0], hand[9] = (0.0, 0.0), (0.0, -100.0)
+    assert one_per_hand([hand], [0.9]) == [0]
+    # the same hand read twice, the second's wrist 60 px off (as tracked in a stale box): the
+    # surer one stays, whichever comes first
+    ghost = hand + 3.0
+    ghost[0] += (0.0, 60.0)
+    assert one_per_hand([hand, ghost], [0.88, 0.68]) == [0]
+    assert one_per_hand([ghost, hand], [0.68, 0.88]) == [1]
+    # two hands side by side, or one across the other's fingers: both stay
+    assert one_per_hand([hand, hand + (120.0, 0.0)], [0.9, 0.9]) == [0, 1]
+    assert one_per_hand([hand, hand + (0.0, -60.0)], [0.9, 0.9]) == [0, 1]
+
+
 # -- pose ------------------------------------------------------------------------------------
 
 def synthetic_body(*, raise_left=30.0, elbow_left=45.0, wrist_left=20.0, raise_right=90.0,

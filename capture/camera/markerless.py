@@ -185,6 +185,30 @@ def assign_sides(hands: list[tuple[str, float, tuple[float, float]]],
     return []
 
 
+SAME_HAND = 0.3      # two hands' mean landmark distance [palm lengths] under which they are one
+
+
+def one_per_hand(points: list[np.ndarray], scores: list[float]) -> list[int]:
+    """Which of the hands found to keep (indices, in order): two whose landmarks nearly coincide
+    (mean distance under SAME_HAND palm lengths, wrist to middle knuckle) are one hand found
+    twice, tracked in its box from the last frame and found by a palm search (the graph keeps
+    both when the boxes overlap too little: a hand that moved far in one frame); the higher
+    score stays.
+
+    points : per hand (21, 2+) image points, x and y in one unit (pixels); scores : the
+    handedness scores."""
+    keep = list(range(len(points)))
+    for a in range(len(points)):
+        for b in range(a + 1, len(points)):
+            if a not in keep or b not in keep:
+                continue
+            pa, pb = np.asarray(points[a])[:, :2], np.asarray(points[b])[:, :2]
+            palm = max(np.linalg.norm(p[9] - p[0]) for p in (pa, pb))     # middle knuckle, wrist
+            if np.linalg.norm(pa - pb, axis=1).mean() < SAME_HAND * palm:
+                keep.remove(b if scores[a] >= scores[b] else a)
+    return keep
+
+
 # the hands graph's palm search, gated from Python (see `_searching_hands`)
 _SKIP_SEARCH, _SEARCHED, _ENOUGH_HANDS = ("skip_palm_search", "palm_detection_image",
                                           "DISALLOW:prev_has_enough_hands")
@@ -555,6 +579,12 @@ class HandsTracker(MediapipeTracker):
                                        "multi_handedness", _SEARCHED)
         found, worlds, labels = (value or [] for value in streams)
         self._searching(searched is not None, len(found))
+        if len(found) > 1:
+            height, width = rgb.shape[:2]
+            keep = one_per_hand(
+                [np.array([(p.x * width, p.y * height) for p in hand.landmark]) for hand in found],
+                [label.classification[0].score for label in labels])
+            found, worlds, labels = ([hands[k] for k in keep] for hands in (found, worlds, labels))
         out = np.full(len(self.channels), np.nan)
         hands = []
         for landmarks, handedness in zip(found, labels):

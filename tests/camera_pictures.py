@@ -51,3 +51,30 @@ def card_over(picture, points, top=None):
     y0 = max(y0, 0) if top is None else int(top)
     covered[y0:y1, max(x0, 0):x1] = (90, 90, 90)
     return covered
+
+
+def cut_out(picture):
+    """(h, w) uint8 mask, 1 on the picture's largest coloured region (a hand on a grey or black
+    ground: saturation over 60, value over 40), to lay the hand over other pictures."""
+    import cv2
+    hsv = cv2.cvtColor(picture, cv2.COLOR_BGR2HSV)
+    mask = ((hsv[..., 1] > 60) & (hsv[..., 2] > 40)).astype(np.uint8)
+    mask = cv2.morphologyEx(mask, cv2.MORPH_OPEN, np.ones((3, 3), np.uint8))
+    _, labels, stats, _ = cv2.connectedComponentsWithStats(mask)
+    largest = 1 + np.argmax(stats[1:, cv2.CC_STAT_AREA])
+    return cv2.morphologyEx((labels == largest).astype(np.uint8), cv2.MORPH_CLOSE,
+                            np.ones((5, 5), np.uint8))
+
+
+GROUND = (90, 100, 110)     # BGR: the plain ground the cut-out pictures are laid on
+
+
+def layered(*layers):
+    """A frame of cut-out pictures on a plain ground, each (picture, mask, matrix) placed by its
+    affine matrix, the later ones over the earlier."""
+    import cv2
+    frame = np.full((H, W, 3), GROUND, np.float32)
+    for picture, mask, matrix in layers:
+        alpha = cv2.warpAffine(mask.astype(np.float32), matrix, (W, H))[..., None]
+        frame = place(picture, matrix) * alpha + frame * (1 - alpha)
+    return frame.astype(np.uint8)

@@ -557,10 +557,12 @@ class HandsTracker(MediapipeTracker):
     def _searching(self, searched: bool, tracked: int) -> None:
         """After a frame: when the palm search runs next."""
         self.searched = searched
-        if searched:
+        if tracked < self._tracked:
+            # a hand was lost: look for it on the next frame, also after a frame searched in
+            # vain (a hand blurred by a fast move is found again when it is sharp)
+            self._search_wait = 0
+        elif searched:
             self._search_wait = self.search_every - 1
-        elif tracked < self._tracked:
-            self._search_wait = 0          # a hand was lost: look for it on the next frame
         else:
             self._search_wait -= 1
         self._tracked = tracked

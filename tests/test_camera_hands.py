@@ -15,9 +15,9 @@ pictures in Debian's `opencv-doc` (a test dependency: `scripts/setup.sh --test` 
 - a hand that jumps (the picture cut from one open hand to the other) is one hand, not two;
 - cut from its ground and laid over a plain one: a left hand and its mirror image crossing,
   one over the other, keep their sides; a hand leaving across the picture's edge reads sane
-  bends while partly out, NaN when gone, and is found again on its way back; a hand that
-  jumps across the picture, through a frame blurred along the move, is lost for a frame at
-  most, on its side.
+  bends while partly out, keeps its side, is NaN when gone and found again on its way back; a
+  hand that jumps across the picture, through a frame blurred along the move, is lost for a
+  frame at most, on its side; a hand moving fast keeps its bends.
 The core assertions run with `model="full"` (the default) and `model="lite"`.
 """
 from pathlib import Path
@@ -294,9 +294,11 @@ def test_a_hand_leaving_across_the_edge_is_sane_then_gone_then_back(tmp_path):
     values, statuses = track_statuses(tmp_path / "edge.mkv",
                                       [layered((photo, mask, m)) for m in matrices])
     hand = side_of(values, "left")
-    assert np.isnan(side_of(values, "right")).all()   # MediaPipe said "right" once, at 360 px
+    # MediaPipe says "right" (0.93) at 360 px, its wrist out of the picture: read from a part
+    # of the hand, unsure, it keeps its side
+    assert np.isnan(side_of(values, "right")).all()
     # partly out (frames 3-8, up to all but the thumb, the index and half the palm): the bends
-    # within 0.25 of the whole hand's (measured: 0.17, the thumb; no finger jumps to a fist)
+    # within 0.25 of the whole hand's (measured: 0.15, the thumb; no finger jumps to a fist)
     assert np.isfinite(hand[:9]).all()
     bends = np.abs(hand[3:9, BENDS] - np.median(hand[:3, BENDS], axis=0))
     assert bends.max() < 0.25, bends.max()
@@ -337,3 +339,19 @@ def test_a_fast_move_loses_the_hand_for_a_frame_at_most(tmp_path, name):
     assert found[:3].all() and found[5:8].all() and found[9:].all(), np.flatnonzero(~found)
     error = wrist_error(values, matrices, "left")
     assert error[found & (np.arange(len(xs)) != 3)].max() < WRIST_PX
+
+
+@pytest.mark.parametrize("name, step", [("wall", 90), ("dark", 40)])
+def test_a_hand_moving_fast_keeps_its_bends(tmp_path, name, step):
+    # the hand moves across the picture by more than half its palm's length a frame (wall: 90
+    # px, its palm 109 px; dark: 40 px, its palm 51 px): read in the box from the last frame's
+    # points it lay off centre, the thumb 0.76 and 0.46 off its bend when still; read again in
+    # a box from its points now
+    photo, mask = cut(name)
+    xs = [-150] * 3 + list(range(-150, 151, step))[1:]
+    frames = [layered((photo, mask, placement(photo, scale=0.5, dx=dx))) for dx in xs]
+    values = track(tmp_path, frames, tracker="hands")
+    hand = side_of(values, "left")
+    assert np.isfinite(hand).all() and np.isnan(side_of(values, "right")).all()
+    bends = np.abs(hand[3:, BENDS] - np.median(hand[:3, BENDS], axis=0))
+    assert bends.max() < 0.1, bends.max()          # measured: 0.03 (wall), 0.02 (dark)

@@ -212,6 +212,11 @@ def test_hands_keep_their_sides():
     assert assign_sides([("right", 0.95, (0.7, 0.52))], last) == ["right"]
     last = {"right": (0.3, 0.5), "left": (0.72, 0.5)}
     assert assign_sides([("right", 0.6, (0.32, 0.5))], last) == ["right"]
+    # partly out of the picture, its wrist beyond the edge: read from a part, unsure however
+    # sure MediaPipe says it is
+    last = {"right": None, "left": (0.98, 0.5)}
+    assert assign_sides([("right", 0.95, (1.08, 0.5))], last) == ["left"]
+    assert assign_sides([("right", 0.95, (0.9, 0.5))], last) == ["right"]
 
 
 def test_one_hand_found_twice_is_one_hand():

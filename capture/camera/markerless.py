@@ -165,9 +165,9 @@ def assign_sides(hands: list[tuple[str, float, tuple[float, float]]],
     hands : [(side MediaPipe gave, its score 0..1, wrist (x, y) image fractions)] in detection
     order; last_wrist : {"right": (x, y) | None, "left": ...} where each side's wrist was on the
     previous frame. Two hands given the same side: the higher score keeps it, the other takes
-    the other side. A lone hand given a side with a score under 0.8 takes the other side when
-    that side's wrist was seen last frame nearer to it (a hand's side should not flip while it
-    stays in view)."""
+    the other side. A lone hand given a side with a score under 0.8, or with its wrist out of
+    the picture (read from the part of it in view), takes the other side when that side's wrist
+    was seen last frame nearer to it (a hand's side should not flip while it stays in view)."""
     if len(hands) >= 2:
         (side_a, score_a, _), (side_b, score_b, _) = hands[:2]
         if side_a != side_b:
@@ -177,7 +177,8 @@ def assign_sides(hands: list[tuple[str, float, tuple[float, float]]],
     if len(hands) == 1:
         side, score, wrist = hands[0]
         other = "left" if side == "right" else "right"
-        if score < 0.8 and last_wrist.get(other) is not None:
+        unsure = score < 0.8 or not (0.0 <= wrist[0] <= 1.0 and 0.0 <= wrist[1] <= 1.0)
+        if unsure and last_wrist.get(other) is not None:
             to_other = math.dist(wrist, last_wrist[other])
             if last_wrist.get(side) is None or to_other < math.dist(wrist, last_wrist[side]):
                 return [other]
@@ -207,6 +208,28 @@ def one_per_hand(points: list[np.ndarray], scores: list[float]) -> list[int]:
             if np.linalg.norm(pa - pb, axis=1).mean() < SAME_HAND * palm:
                 keep.remove(b if scores[a] >= scores[b] else a)
     return keep
+
+
+RECENTRE = 0.5       # a hand's move in one frame [palm lengths] over which it is read again
+
+
+def moved_far(hands: list, last_wrist: dict, shape: tuple) -> bool:
+    """Whether a hand moved more than RECENTRE palm lengths (wrist to middle knuckle) from the
+    nearest wrist of the last frame: MediaPipe reads each tracked hand in a box from its points
+    on the last frame, and a hand far off the box's centre reads its bends and roll astray.
+
+    hands : per hand its 21 image points (with .x, .y image fractions); last_wrist : {side:
+    (x, y) | None} image fractions; shape : the frame's (height, width, ...)."""
+    last = [wrist for wrist in last_wrist.values() if wrist is not None]
+    height, width = shape[:2]
+    for points in hands:
+        wrist, knuckle = points[0], points[9]
+        palm = math.hypot((knuckle.x - wrist.x) * width, (knuckle.y - wrist.y) * height)
+        move = min((math.hypot((wrist.x - x) * width, (wrist.y - y) * height) for x, y in last),
+                   default=0.0)
+        if move > RECENTRE * palm:
+            return True
+    return False
 
 
 # the hands graph's palm search, gated from Python (see `_searching_hands`)
@@ -502,7 +525,8 @@ class HandsTracker(MediapipeTracker):
         `max_hands` hands are tracked, and on the next frame whenever a tracked hand is lost;
         tracked hands are followed on every frame. 1: every frame, as MediaPipe does. A hand
         coming into view is found up to `search_every - 1` frames later (67 ms at 30 fps);
-        the search takes about as long as the rest of a frame with one hand.
+        the search takes about as long as the rest of a frame with one hand. A hand that moved
+        far since the last frame (`moved_far`) is read again, without a search.
     mirrored : the camera already mirrors its picture (a "selfie" view); default False, as
         OpenCV delivers it.
     """
@@ -530,6 +554,7 @@ class HandsTracker(MediapipeTracker):
         _, solutions = _mediapipe()
         from mediapipe.python import packet_creator
         self._bool_packet = packet_creator.create_bool
+        self._search_now = True      # the palm search runs on the frame going in
         self._search_wait = 0        # frames until the palm search runs again
         self._tracked = 0            # hands tracked on the last frame
         self.searched = False        # the palm detector searched the last frame
@@ -551,8 +576,7 @@ class HandsTracker(MediapipeTracker):
                 "search_every": self.search_every}
 
     def _more_inputs(self) -> tuple:
-        search = self._tracked < self.max_hands and self._search_wait <= 0
-        return ((_SKIP_SEARCH, self._bool_packet(not search)),)
+        return ((_SKIP_SEARCH, self._bool_packet(not self._search_now)),)
 
     def _searching(self, searched: bool, tracked: int) -> None:
         """After a frame: when the palm search runs next."""
@@ -575,12 +599,23 @@ class HandsTracker(MediapipeTracker):
             side = "right" if side == "left" else "left"
         return side
 
-    def process(self, image: np.ndarray) -> np.ndarray:
-        rgb = self._rgb_of(image)
+    def _read(self, rgb: np.ndarray, search: bool) -> tuple[list, list, list, bool]:
+        """The hands' image points, world points and handedness in one frame, and whether the
+        palm search ran on it."""
+        self._search_now = search
         *streams, searched = self._run(rgb, "multi_hand_landmarks", "multi_hand_world_landmarks",
                                        "multi_handedness", _SEARCHED)
-        found, worlds, labels = (value or [] for value in streams)
-        self._searching(searched is not None, len(found))
+        return (*(value or [] for value in streams), searched is not None)
+
+    def process(self, image: np.ndarray) -> np.ndarray:
+        rgb = self._rgb_of(image)
+        search = self._tracked < self.max_hands and self._search_wait <= 0
+        found, worlds, labels, searched = self._read(rgb, search)
+        if moved_far([hand.landmark for hand in found], self._last_wrist, rgb.shape):
+            # read in boxes from the last frame's points, a hand that moved far lay off their
+            # centre (bends and roll astray): read the frame again in boxes from its points now
+            found, worlds, labels, _ = self._read(rgb, False)
+        self._searching(searched, len(found))
         if len(found) > 1:
             height, width = rgb.shape[:2]
             keep = one_per_hand(
@@ -617,6 +652,7 @@ class HandsTracker(MediapipeTracker):
 
     def reset(self) -> None:
         self._search_wait, self._tracked, self.searched = 0, 0, False
+        self._search_now = True      # the blank frame that loads the models searches it too
         super().reset()
         self._last_wrist = {side: None for side in self.SIDES}
 

@@ -67,17 +67,19 @@ def _scale_row(row, f):
 def prepare_frame(model, state, x):
     """Clean one input frame ``x (D,)`` into ``state.xs`` and ``state.observed``: NaN is a
     missing channel (xs 0, observed 0), and so is a value outside [lower, upper] (+-inf, a
-    stuck or absurd sensor: counted in ``state.outliers``). Returns the number of observed
-    channels."""
+    stuck or absurd sensor: counted in ``state.outliers``). A channel that never moves in the
+    demonstrations (``model.moving``) is left out too, unless it is an outlier. Returns the
+    number of observed channels."""
     lower, upper, xs, observed = model.lower, model.upper, state.xs, state.observed
     count = 0
     outliers = 0
     for d in range(x.shape[0]):
         v = x[d]
         if v >= lower[d] and v <= upper[d]:  # False for NaN
-            xs[d] = v
-            observed[d] = 1.0
-            count += 1
+            keep = model.moving[d]
+            xs[d] = v if keep else 0.0
+            observed[d] = 1.0 if keep else 0.0
+            count += 1 if keep else 0
         else:
             xs[d] = 0.0
             observed[d] = 0.0

@@ -22,7 +22,7 @@ from followers.bank_model import (bank_sigmas, bank_state, build_bank_model, che
                                   reset_bank)
 from followers.bank_output import BankOutput, BankTrace
 from followers.config import BankConfig, FollowerConfig
-from followers.defaults import as_sigma, as_window, default_window
+from followers.defaults import as_sigma, as_window, default_window, moving_channels
 from followers.demos import Demonstrations, combine
 from followers.follower import Follower, adaptation, chain, resolve_config
 from followers.model import build_forward, check_frame, forward_state, reset_forward
@@ -151,7 +151,8 @@ class FollowerBank:
             tilt=fc.subframe_tilt, outlier_span=fc.outlier_span, recognition=recognition,
             exact=exact,
             adaptation=adaptation(fc, fc.adapt_sigma and defaults and model.kind != "mop"),
-            report_adaptation=adaptation(fc, defaults))
+            report_adaptation=adaptation(fc, defaults),
+            moving=moving_channels([t for a in actions for t in a.takes]))
         self._exact = np.ones((K, arrays[0].shape[1])) if exact is None else exact
         self._demonstrations = actions
         self._model = build_bank_model(
@@ -162,7 +163,7 @@ class FollowerBank:
         self._still_window = StillWindow(self._still, arrays[0].shape[1])
         self._still_state = StillState()
         # the shown variance widened by the residual's autocorrelation (followers.intervals)
-        self._intervals = stacked(arrays, sigmas)
+        self._intervals = stacked(arrays, sigmas, self._forward.model.moving)
         self._interval_state = interval_state(arrays[0].shape[1])
         self._frame = np.zeros((1, arrays[0].shape[1]))
         self._shown, self._shown_progress, self._shown_variance = (

@@ -23,7 +23,8 @@ from typing import NamedTuple
 import numpy as np
 
 from followers.config import BankConfig
-from followers.defaults import exact_scales, noise_sigmas, pooled_sigma, recognition_sigma
+from followers.defaults import (exact_scales, moving_channels, moving_columns, noise_sigmas,
+                               pooled_sigma, recognition_sigma)
 
 
 class BankModel(NamedTuple):
@@ -134,12 +135,16 @@ def bank_sigmas(actions: list, config: BankConfig, own=None):
     action's base sigma, floored at the pooled default; None: the pooled default."""
     arrays = [a.template for a in actions]
     own = own or [None] * len(arrays)
-    pooled = pooled_sigma([t for a in actions for t in a.takes], config.follower)
+    takes = [t for a in actions for t in a.takes]
+    pooled = pooled_sigma(takes, config.follower)
+    moving = moving_channels(takes)
     bases = [np.broadcast_to(pooled, a.shape) if o is None else np.maximum(o, pooled)
              for a, o in zip(arrays, own)]
     offsets = np.cumsum([0] + [a.shape[0] for a in arrays[:-1]])
-    _, variance = segment_moments(np.concatenate(arrays, axis=0), offsets)
-    spread = np.sqrt(variance)
+    spread = np.zeros((len(arrays), moving.size))
+    _, variance = segment_moments(np.concatenate(moving_columns(arrays, moving), axis=0),
+                                  offsets)
+    spread[:, moving] = np.sqrt(variance)
     weight = config.follower.spread_weight
 
     def widened(scale, base, action):
@@ -147,7 +152,7 @@ def bank_sigmas(actions: list, config: BankConfig, own=None):
         return sigma if action.count < 2 else np.sqrt(sigma ** 2 + weight * action.spread ** 2)
 
     sigmas = [widened(config.following_scale, b, a) for b, a in zip(bases, actions)]
-    recognition = [recognition_sigma(s, widened(config.recognition_scale, b, a), config)
+    recognition = [recognition_sigma(s, widened(config.recognition_scale, b, a), config, moving)
                    for s, b, a in zip(spread, bases, actions)]
     exact = None
     if config.mixture_start > 0.0:
@@ -188,6 +193,25 @@ def outline_models(stacked: np.ndarray, lengths: np.ndarray, states: int,
     return mean, variance + floor[:, None, :], spread
 
 
+def moving_outlines(stacked: np.ndarray, moving: np.ndarray, lengths: np.ndarray, states: int,
+                    config: BankConfig, owner: np.ndarray):
+    """``outline_models`` and the background's mean, from the ``moving (D,)`` channels alone;
+    a channel that never moves (left out of every score) gets its value as the mean and a
+    variance and spread of 1."""
+    if moving.all():
+        return (*outline_models(stacked, lengths, states, config, owner), stacked.mean(axis=0))
+    live = stacked[:, moving]
+    live_mean, live_variance, live_spread = outline_models(live, lengths, states, config, owner)
+    mean = np.empty(live_mean.shape[:2] + moving.shape)
+    mean[...] = stacked[0]
+    variance = np.ones_like(mean)
+    spread, background = np.ones(moving.size), stacked[0].copy()
+    mean[..., moving], variance[..., moving], spread[moving] = (live_mean, live_variance,
+                                                                live_spread)
+    background[moving] = live.mean(axis=0)
+    return mean, variance, spread, background
+
+
 def build_bank_model(actions: list, config: BankConfig, *, resolution: int,
                      restart: tuple[float, float], subframe: bool,
                      mixture: float) -> BankModel:
@@ -201,8 +225,9 @@ def build_bank_model(actions: list, config: BankConfig, *, resolution: int,
     owner = np.repeat(np.arange(K), [a.count for a in actions])
     lengths = np.array([t.shape[0] for t in takes])
     stacked = np.concatenate(takes, axis=0)
-    outline_mean, variance, spread = outline_models(
-        stacked, lengths, min(c.outline_states, lengths.min()), c, owner)
+    outline_mean, variance, spread, background_mean = moving_outlines(
+        stacked, moving_channels(takes), lengths, min(c.outline_states, lengths.min()), c,
+        owner)
     rejecting = math.isfinite(c.reject_margin)
     hysteresis = c.reject_hysteresis if rejecting else 0.0
     idle = max(restart)
@@ -210,7 +235,7 @@ def build_bank_model(actions: list, config: BankConfig, *, resolution: int,
     return BankModel(
         outline_mean=outline_mean, outline_inv_var=1.0 / variance, outline_log_norm=log_norm,
         outline_log_norm_sum=log_norm.sum(axis=2),
-        background_mean=stacked.mean(axis=0), background_weight=1.0 / spread ** 2,
+        background_mean=background_mean, background_weight=1.0 / spread ** 2,
         background_log_norm=-0.5 * np.log(2.0 * np.pi * spread ** 2),
         thresholds=np.full(K, c.reject_margin if rejecting else -1e300),
         outline_weight=c.outline_weight,

@@ -2,11 +2,15 @@
 
 - **sigma** (per channel, the same for every state): ``sigma_fraction`` times the channel's
   standard deviation over all frames of the template (of all templates, in a bank), the
-  spread floored at ``sigma_floor`` times the root-mean-square spread over channels (so a
-  channel that never moves in the demonstration does not make every other value
-  impossible), and 1.0 when the template does not move at all. A performer repeating a
-  demonstration rarely differs from it by less than a quarter of the channel's range of
-  motion; a much smaller sigma makes the follower brittle, a much larger one blurs positions.
+  spread floored at ``sigma_floor`` times the root-mean-square spread over the channels that
+  move (so a channel that moves little does not make every other value impossible), and 1.0
+  when the template does not move at all. A performer repeating a demonstration rarely
+  differs from it by less than a quarter of the channel's range of motion; a much smaller
+  sigma makes the follower brittle, a much larger one blurs positions.
+- **a channel that never moves** (one value in every take up to rounding,
+  ``moving_channels``) tells no action from another: the followers leave it out of every
+  score like a missing channel (a value far outside what the takes span still counts as an
+  outlier), and no statistic over channels counts it (``moving_columns``, ``moving_rms``).
 - **recognition sigma** (a bank): at least ``recognition_floor`` of each template's own
   channel spread: another performance of an action differs from the demonstration in
   intensity as well as timing.
@@ -25,6 +29,7 @@ import math
 import numpy as np
 
 from followers.config import FollowerConfig
+from followers.preprocessing import changes
 
 _DEFAULT = FollowerConfig()
 
@@ -62,11 +67,35 @@ def channel_spread(templates: list[np.ndarray]) -> np.ndarray:
     return np.sqrt(square / count)
 
 
+def moving_channels(templates: list[np.ndarray]) -> np.ndarray:
+    """(D,) bool: the channels whose value changes somewhere in ``templates`` by more than
+    rounding (``preprocessing.changes``, the normaliser's rule); every channel when none
+    does."""
+    high = np.max([t.max(axis=0) for t in templates], axis=0)
+    low = np.min([t.min(axis=0) for t in templates], axis=0)
+    moving = changes(high - low, np.maximum(np.abs(high), np.abs(low)))
+    return moving if moving.any() else np.ones_like(moving)
+
+
+def moving_columns(arrays: list[np.ndarray], moving: np.ndarray) -> list[np.ndarray]:
+    """``arrays`` (each (N_i, D)) cut to their ``moving (D,)`` columns (the same list when
+    every channel moves): what a channel-by-channel statistic is computed from, so that it
+    is the same to the last bit with or without a channel that never moves."""
+    return arrays if moving.all() else [a[:, moving] for a in arrays]
+
+
+def moving_rms(spread: np.ndarray, moving: np.ndarray) -> float:
+    """The root-mean-square of ``spread (D,)`` over the ``moving (D,)`` channels."""
+    return float(np.sqrt(np.mean(spread[moving] ** 2)))
+
+
 def pooled_sigma(templates: list[np.ndarray], config: FollowerConfig = _DEFAULT) -> np.ndarray:
     """(D,) float [input units]: the default sigma per channel from the spread of all
     ``templates`` together (see the module docstring)."""
-    spread = channel_spread(templates)
-    rms = float(np.sqrt(np.mean(spread ** 2)))
+    moving = moving_channels(templates)
+    spread = np.zeros(moving.size)
+    spread[moving] = channel_spread(moving_columns(templates, moving))
+    rms = moving_rms(spread, moving)
     if rms <= 0.0:
         return np.ones_like(spread)
     return config.sigma_fraction * np.maximum(spread, config.sigma_floor * rms)
@@ -81,11 +110,13 @@ def default_sigma(template: np.ndarray, *, pooled: list[np.ndarray] | None = Non
     return np.ascontiguousarray(np.broadcast_to(base, template.shape))
 
 
-def recognition_sigma(spread: np.ndarray, sigma: np.ndarray, config) -> np.ndarray:
+def recognition_sigma(spread: np.ndarray, sigma: np.ndarray, config,
+                      moving: np.ndarray) -> np.ndarray:
     """(T, D) float: a bank's recognition sigma for one template: ``sigma`` (T, D), but at
     least ``config.recognition_floor`` times the template's own channel ``spread (D,)``
-    (floored like the default sigma); ``config`` a ``BankConfig``."""
-    rms = float(np.sqrt(np.mean(spread ** 2)))
+    (floored like the default sigma, over the bank's ``moving (D,)`` channels); ``config`` a
+    ``BankConfig``."""
+    rms = moving_rms(spread, moving)
     if rms <= 0.0:
         return np.array(sigma)
     own = config.recognition_floor * np.maximum(spread, config.follower.sigma_floor * rms)

@@ -31,7 +31,7 @@ import numba as nb
 import numpy as np
 
 from followers.config import FollowerConfig
-from followers.defaults import as_template, noise_sigmas, pooled_sigma
+from followers.defaults import as_template, moving_channels, noise_sigmas, pooled_sigma
 
 # rounds of aligning every take to the average and averaging again (Wiimote pick-up, five
 # takes: the largest change of a frame in the fifth round is 0.06 of the channel's spread)
@@ -88,9 +88,10 @@ def is_takes(value) -> bool:
 def _align(reference, take, weight):
     """For each frame of ``reference (S, D)``, the first and last frame of ``take (N, D)``
     aligned to it by dynamic time warping (channel-weighted squared distances, steps (1, 0),
-    (0, 1), (1, 1)): (S, 2) int64."""
-    a = reference * np.sqrt(weight)
-    b = take * np.sqrt(weight)
+    (0, 1), (1, 1); a channel of weight 0 left out): (S, 2) int64."""
+    kept = weight > 0.0
+    a = reference[:, kept] * np.sqrt(weight[kept])
+    b = take[:, kept] * np.sqrt(weight[kept])
     distance = (a * a).sum(axis=1)[:, None] + (b * b).sum(axis=1)[None, :] - 2.0 * (a @ b.T)
     return warp(np.maximum(distance, 0.0))
 
@@ -237,10 +238,12 @@ def combine(takes, *, config: FollowerConfig | None = None, name: str = "action"
         return Demonstrations(one, np.zeros_like(one), None, np.zeros(1), lengths, tuple(takes))
     noise = np.median(noise_sigmas(takes), axis=0)
     base = pooled_sigma(takes, config)
-    if template is None:
-        template = average(takes, 1.0 / base ** 2)
+    moving = moving_channels(takes)
+    if template is None:  # a channel that never moves aligns nothing and keeps its value
+        template = average(takes, np.where(moving, 1.0 / base ** 2, 0.0))
+        template[:, ~moving] = takes[0][0, ~moving]
     measuring = config.replace(resolution=1, adapt_sigma=False, tempo_variance=False)
     spread, per_take = spread_of(template, takes, measuring)
     scale = np.maximum(template.std(axis=0), base)
-    distances = np.sqrt((per_take / scale ** 2).mean(axis=1))
+    distances = np.sqrt((per_take / scale ** 2)[:, moving].mean(axis=1))
     return Demonstrations(template, spread, noise, distances, lengths, tuple(takes))

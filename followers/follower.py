@@ -168,7 +168,7 @@ class Follower:
         # one frame's progress and variance for the kernels, reused
         self._frame_progress, self._frame_variance = np.zeros(1), np.zeros(1)
         # the variance widened by the residual's autocorrelation (followers.intervals)
-        self._intervals = stacked([tmpl], [self._sigma])
+        self._intervals = stacked([tmpl], [self._sigma], self._forward.model.moving)
         self._interval_state = interval_state(D)
         self._frame = np.zeros((1, D))
         self._on = np.zeros(1, dtype=np.int64)

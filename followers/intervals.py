@@ -65,7 +65,8 @@ def widen(templates, sigmas, offsets, which, X, progress, variance, memory, cap,
     templates, sigmas : (sum T_k, D) the followers' templates and sigmas stacked;
     offsets, lengths implied: template ``k`` is rows ``offsets[k]:offsets[k + 1]``;
     which : (N,) int: the template each frame's ``progress`` is on (< 0: none, the frame is
-    left alone); X : (N, D) input (NaN, inf: missing); memory [frames]; cap [x variance];
+    left alone); X : (N, D) input (NaN, inf: missing; a channel of infinite sigma, one that
+    never moves, is left out); memory [frames]; cap [x variance];
     clip [sigmas]: a residual counts at most this far (an absurd value, an outlier, would
     hold the estimate for many frames); resolution : states per template frame; state : see
     ``interval_state``, carried across calls."""
@@ -85,12 +86,12 @@ def widen(templates, sigmas, offsets, which, X, progress, variance, memory, cap,
         seen = 0
         for d in range(D):
             x = X[n, d]
-            if not math.isfinite(x):
+            a = start + low
+            scale = (1.0 - w) * sigmas[a, d] + w * sigmas[a + 1, d]
+            if not (math.isfinite(x) and math.isfinite(scale)):
                 state[_HEAD + d] = 0.0
                 continue
-            a = start + low
             expected = (1.0 - w) * templates[a, d] + w * templates[a + 1, d]
-            scale = (1.0 - w) * sigmas[a, d] + w * sigmas[a + 1, d]
             r = min(max((x - expected) / scale, -clip), clip)
             lag1 += r * state[_HEAD + d]
             lag0 += r * r
@@ -117,11 +118,15 @@ def widen_arguments(intervals, config, which, X, progress, variance, state):
             state)
 
 
-def stacked(templates, sigmas):
-    """(templates (sum T_k, D), sigmas (sum T_k, D), offsets (K + 1,) int64) for ``widen``."""
+def stacked(templates, sigmas, moving=None):
+    """(templates (sum T_k, D), sigmas (sum T_k, D), offsets (K + 1,) int64) for ``widen``;
+    the sigma of a channel that never moves (``moving (D,)`` false; None: every one moves)
+    infinite."""
     offsets = np.zeros(len(templates) + 1, dtype=np.int64)
     offsets[1:] = np.cumsum([t.shape[0] for t in templates])
+    scales = np.concatenate([np.broadcast_to(s, t.shape) for t, s in zip(templates, sigmas)],
+                            axis=0)
+    if moving is not None and not moving.all():
+        scales[:, ~moving] = np.inf
     return (np.ascontiguousarray(np.concatenate(templates, axis=0)),
-            np.ascontiguousarray(np.concatenate(
-                [np.broadcast_to(s, t.shape) for t, s in zip(templates, sigmas)], axis=0)),
-            offsets)
+            np.ascontiguousarray(scales), offsets)

@@ -34,6 +34,8 @@ The layout of the state (see ``_kernels`` for the algorithm):
   inside a state's cell), ``mixture (1,)`` (the weight above).
 - ``outliers (1,)``: channels of the last frame outside ``[model.lower, model.upper]`` (far
   outside what the templates span: a stuck or absurd sensor), left out like missing ones.
+  A channel that never moves in the demonstrations (``model.moving`` false) is left out of
+  every score too, unless it is an outlier (``followers.defaults.moving_channels``).
 - Scratch: ``xs, observed (D,)`` (the cleaned frame), ``residual (S,)`` (each
   state's capped sum of squared z-scores), ``lift (S,)`` (each state's emission over the
   frame's largest), ``sub (4, S)`` (see ``_kernels._subframe_rows``), ``mixed (T + 2A, M)``
@@ -50,6 +52,7 @@ from typing import NamedTuple
 import numpy as np
 
 from followers._kernels import upsample_into
+from followers.defaults import moving_channels, moving_rms
 from followers.transitions import TransitionModel
 
 
@@ -68,6 +71,7 @@ class ForwardModel(NamedTuple):
     exact_log: np.ndarray      # (K, D): log exact scale
     lower: np.ndarray          # (D,): a value outside [lower, upper] is an outlier (left out)
     upper: np.ndarray          # (D,)
+    moving: np.ndarray         # (D,) bool: false for a channel that never moves (left out)
     advance: np.ndarray        # (A + 1, M): P(advance by a states | speed level m)
     advance_tail: np.ndarray   # (A + 1, M): P(advance >= a), what lands on the last state
     speed_change: np.ndarray   # (3, M): P(level m stays), P(from m - 1 to m), P(m + 1 to m)
@@ -223,13 +227,14 @@ def _exact_scales(exact, K: int, D: int) -> np.ndarray:
     return scales
 
 
-def span_bounds(stacked: np.ndarray, span: float) -> tuple[np.ndarray, np.ndarray]:
+def span_bounds(stacked: np.ndarray, span: float,
+                moving: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(lower, upper), each (D,): ``span`` times each channel's range over ``stacked`` beyond
-    that range (a channel that never moves counts a twentieth of the RMS range; if none moves,
-    1), outside which an input value is an outlier."""
+    that range (a channel that never moves counts a twentieth of the RMS range over the
+    ``moving`` channels; if none moves, 1), outside which an input value is an outlier."""
     lo, hi = stacked.min(axis=0), stacked.max(axis=0)
     width = hi - lo
-    rms = float(np.sqrt(np.mean(width ** 2)))
+    rms = moving_rms(width, moving)
     width = np.maximum(width, 0.05 * rms) if rms > 0.0 else np.ones_like(width)
     return lo - span * width, hi + span * width
 
@@ -237,7 +242,8 @@ def span_bounds(stacked: np.ndarray, span: float) -> tuple[np.ndarray, np.ndarra
 def build_forward(templates: list[np.ndarray], sigmas: list[np.ndarray], windows,
                   transitions: TransitionModel, *, cap: float, prune: float, tilt: float,
                   outlier_span: float, recognition: list[np.ndarray] | None = None,
-                  exact=None, adaptation=None, report_adaptation=None, temper=None) -> Forward:
+                  exact=None, adaptation=None, report_adaptation=None, temper=None,
+                  moving=None) -> Forward:
     """The forward model of K followers that share one transition model.
 
     templates, sigmas : K (T_k, D) float arrays (validated) [input units]; windows (K,) int
@@ -252,7 +258,10 @@ def build_forward(templates: list[np.ndarray], sigmas: list[np.ndarray], windows
         of the recursion's and the report's online emission scale, or None (fixed).
     temper : (memory [frames], largest factor, clip [sigmas]) of the tempering of the
         recursion's emission variance by the residual's correlation, or None (none).
+    moving : (D,) bool, the channels that move in the demonstrations (None: in the templates).
     """
+    if moving is None:
+        moving = moving_channels(templates)
     R = transitions.resolution
     if R > 1:
         # R states per template frame: the template and its sigmas (``_emission_tables``),
@@ -271,7 +280,7 @@ def build_forward(templates: list[np.ndarray], sigmas: list[np.ndarray], windows
     weights, log_norm, log_norm_sum = _emission_tables(sigmas, recognition, R,
                                                        stacked.shape[0])
     scales = _exact_scales(exact, K, D)
-    lower, upper = span_bounds(stacked, outlier_span)
+    lower, upper = span_bounds(stacked, outlier_span, moving)
     adapt, prior = _adaptation(adaptation)
     report, report_prior = _adaptation(report_adaptation)
     windows = np.ascontiguousarray(windows, dtype=np.int64)
@@ -279,7 +288,8 @@ def build_forward(templates: list[np.ndarray], sigmas: list[np.ndarray], windows
     model = ForwardModel(
         stacked, offsets, lengths, windows, weights, log_norm, log_norm_sum,
         np.ascontiguousarray(1.0 / scales ** 2), np.ascontiguousarray(np.log(scales)), lower,
-        upper, *tables, *_tiled(tables, windows, lengths), np.stack([adapt, report]),
+        upper, np.ascontiguousarray(moving, dtype=np.bool_), *tables,
+        *_tiled(tables, windows, lengths), np.stack([adapt, report]),
         _tempering(temper), float(cap), float(prune), float(tilt), recognition is not None)
     return Forward(model, R, (transitions.restart_anywhere, transitions.restart),
                    np.array([prior, report_prior]))

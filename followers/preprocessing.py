@@ -7,6 +7,17 @@ from dataclasses import dataclass
 import numpy as np
 
 
+# a spread below this times a channel's magnitude (at least 1) is rounding, not motion: the
+# channel never changes
+ROUNDING = 1e-12
+
+
+def changes(spread: np.ndarray, level: np.ndarray) -> np.ndarray:
+    """(D,) bool: the channels whose ``spread (D,)`` is more than rounding at their ``level``
+    (D,) [the same units]."""
+    return spread > ROUNDING * np.maximum(1.0, np.abs(level))
+
+
 def _as_2d(values, name: str) -> tuple[np.ndarray, bool]:
     arr = np.asarray(values, dtype=np.float64)
     if arr.ndim == 1:
@@ -63,7 +74,7 @@ def fit_normaliser(demonstrations, *, how: str = "zscore") -> ChannelNormaliser:
         scale = np.nanmax(data, axis=0) - shift
     else:
         raise ValueError(f"how must be 'zscore' or 'range', got {how!r}")
-    scale = np.where(scale > 1e-12 * np.maximum(1.0, np.abs(shift)), scale, 1.0)
+    scale = np.where(changes(scale, shift), scale, 1.0)
     return ChannelNormaliser(shift=shift, scale=scale)
 
 

@@ -4,7 +4,8 @@ Left alone, a bank holds the last action at its end, or starts another at its fi
 for as long as the performer holds still: nothing in the forward recursion says "none of
 these". This stage looks at the input itself. Input becomes **still** at a frame when, over
 the last ``BankConfig.still_frames`` frames, every channel stayed within ``still_band`` times
-that channel's spread over every take (a frame with a missing channel is not still). While
+that channel's spread over every take (a frame with a missing channel is not still; a
+channel that never moves in any take is not judged). While
 the input is still, the shown action is replaced by "no action" unless the action itself
 holds still there (below); once replaced, the input stays still while every channel stays
 within ``RELEASE`` times the band. A person standing still is not a sensor at rest: they sway
@@ -32,6 +33,8 @@ from typing import NamedTuple
 
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
+
+from followers.defaults import moving_channels
 
 # an action is a "still action" when more than this share of its takes' frames are still
 STILL_ACTION_SHARE = 0.5
@@ -76,7 +79,8 @@ def build_still(templates: list[np.ndarray], takes: list[list[np.ndarray]], fram
     (per action its (T_i, D) takes); ``frames``: window [frames] (0: off); ``band``: x each
     channel's spread over every take; ``end``: the bank's end fraction."""
     every = np.concatenate([t for action in takes for t in action], axis=0)
-    widths = band * every.std(axis=0)
+    # a channel that never moves is not judged (live it is left out, or an outlier)
+    widths = np.where(moving_channels([every]), band * every.std(axis=0), np.inf)
     still_action = np.array([
         np.mean(np.concatenate([still_mask(t, frames, widths) for t in action]))
         > STILL_ACTION_SHARE for action in takes]) if frames > 0 else np.zeros(len(takes), bool)

@@ -542,3 +542,56 @@ def test_trained_followers_recognise_wiimote_gestures_as_well_as_each_demonstrat
     X, y, Xt, yt = wiimote
     trained, each = _trained_against_each_demonstration(_complete(X), y, _complete(Xt), yt, k)
     assert trained >= each, (trained, each)
+
+
+def _with_channel(x, values, at):
+    """``x (N, D)`` with the column ``values (N,)`` inserted before channel ``at``."""
+    return np.insert(x, at, values[: len(x)], axis=1)
+
+
+def _decisions(bank, takes):
+    return [bank.follow(x)["action"] for x in takes]
+
+
+def _shown(bank, takes):
+    return [np.stack([t["progress"], t["variance"]]) for t in map(bank.follow, takes)]
+
+
+@pytest.mark.parametrize("which", ["gunpoint", "basic_motions"])
+def test_a_channel_that_never_moves_changes_no_decision(which):
+    """A stuck or unused sensor (a button never pressed, a channel at a constant): a bank of
+    several takes per action, rejection on, decides every frame of other takes as it does
+    without that channel, whether it sits at 0, at another value, or at one value up to
+    rounding; moved a little live it is still ignored. Far outside what the takes span it is
+    an outlier, as any channel is: no action for that frame. What is shown (progress, its
+    variance) is the same up to rounding."""
+    if which == "gunpoint":
+        X, _, y, _ = datasets.load_gunpoint(return_X_y=True)
+        X, y = X[:, :, None], y.astype(str)
+    else:
+        X, y = datasets.load_basic_motions(return_X_y=True)[::2]
+        X, y = X.transpose(0, 2, 1), y.astype(str)
+    classes = sorted(set(y))
+    index = {c: np.flatnonzero(y == c) for c in classes}
+    flat = [X[i] for c in classes for i in index[c][:3]]
+    _, normaliser = normalise(flat)
+    demos = {c: [normaliser(X[i]) for i in index[c][:3]] for c in classes}
+    takes = [normaliser(X[i]) for c in classes for i in index[c][3:5]]
+    expected = _decisions(FollowerBank(demos), takes)
+    shown = _shown(FollowerBank(demos), takes)
+    assert any((a >= 0).any() and (a < 0).any() for a in expected)  # rejection at work
+    N, D = X.shape[1], X.shape[2]
+    rounding = 3.7 + 1e-15 * (np.arange(N) % 2)
+    for values, at in ((np.zeros(N), D), (np.full(N, 3.7), D // 2), (rounding, 0)):
+        bank = FollowerBank({c: [_with_channel(t, values, at) for t in v]
+                             for c, v in demos.items()})
+        said = _decisions(bank, [_with_channel(t, values, at) for t in takes])
+        for a, b in zip(expected, said):
+            np.testing.assert_array_equal(a, b)
+        for a, b in zip(shown, _shown(bank, [_with_channel(t, values, at) for t in takes])):
+            np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-12)
+    nudged = _decisions(bank, [_with_channel(t, rounding + 0.01, 0) for t in takes])
+    for a, b in zip(expected, nudged):
+        np.testing.assert_array_equal(a, b)
+    far = [_with_channel(t, rounding + 100.0, 0) for t in takes]
+    assert all((a == -1).all() for a in _decisions(bank, far))

@@ -8,7 +8,9 @@ every frame (``BankState``), read and written by ``_bank_kernels``.
   spread) for the recognition score, with an exact-repetition component as narrow as each
   template's own noise.
 - The background model: one Gaussian over every frame of every take ("some pose of this
-  performer"), against which the rejection's fit is measured.
+  performer"), against which the rejection's fit is measured. Its spread, which also floors
+  the outline models' variances, is floored like the default sigma's (``sigma_floor`` times
+  the RMS spread): no model of the bank resolves a channel finer than its followers do.
 - The outline models: per action a coarse left-to-right HMM of ``outline_states`` states over
   equal stretches of its takes, each a diagonal Gaussian with the mean and variance of that
   stretch of every take.
@@ -188,7 +190,10 @@ def outline_models(stacked: np.ndarray, lengths: np.ndarray, states: int,
         counts = np.diff(np.append(starts, stacked.shape[0])).reshape(n, states, 1)
         mean, variance = pooled_moments(mean, variance, counts, owner, K)
         _, own = pooled_moments(whole_mean, own, lengths[:, None].astype(float), owner, K)
-    spread = np.maximum(stacked.std(axis=0), 1e-6 * max(1.0, float(np.abs(stacked).max())))
+    spread = stacked.std(axis=0)
+    rms = float(np.sqrt(np.mean(spread ** 2)))
+    spread = np.maximum(spread, config.follower.sigma_floor * rms) if rms > 0.0 else \
+        np.ones_like(spread)
     floor = config.outline_own_variance * own + config.outline_floor * spread ** 2
     return mean, variance + floor[:, None, :], spread
 

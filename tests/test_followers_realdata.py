@@ -557,14 +557,8 @@ def _shown(bank, takes):
     return [np.stack([t["progress"], t["variance"]]) for t in map(bank.follow, takes)]
 
 
-@pytest.mark.parametrize("which", ["gunpoint", "basic_motions"])
-def test_a_channel_that_never_moves_changes_no_decision(which):
-    """A stuck or unused sensor (a button never pressed, a channel at a constant): a bank of
-    several takes per action, rejection on, decides every frame of other takes as it does
-    without that channel, whether it sits at 0, at another value, or at one value up to
-    rounding; moved a little live it is still ignored. Far outside what the takes span it is
-    an outlier, as any channel is: no action for that frame. What is shown (progress, its
-    variance) is the same up to rounding."""
+def _several_takes(which):
+    """(demonstrations {class: 3 normalised takes}, 2 other normalised takes per class)."""
     if which == "gunpoint":
         X, _, y, _ = datasets.load_gunpoint(return_X_y=True)
         X, y = X[:, :, None], y.astype(str)
@@ -573,14 +567,24 @@ def test_a_channel_that_never_moves_changes_no_decision(which):
         X, y = X.transpose(0, 2, 1), y.astype(str)
     classes = sorted(set(y))
     index = {c: np.flatnonzero(y == c) for c in classes}
-    flat = [X[i] for c in classes for i in index[c][:3]]
-    _, normaliser = normalise(flat)
+    _, normaliser = normalise([X[i] for c in classes for i in index[c][:3]])
     demos = {c: [normaliser(X[i]) for i in index[c][:3]] for c in classes}
-    takes = [normaliser(X[i]) for c in classes for i in index[c][3:5]]
+    return demos, [normaliser(X[i]) for c in classes for i in index[c][3:5]]
+
+
+@pytest.mark.parametrize("which", ["gunpoint", "basic_motions"])
+def test_a_channel_that_never_moves_changes_no_decision(which):
+    """A stuck or unused sensor (a button never pressed, a channel at a constant): a bank of
+    several takes per action, rejection on, decides every frame of other takes as it does
+    without that channel, whether it sits at 0, at another value, or at one value up to
+    rounding; moved a little live it is still ignored. Far outside what the takes span it is
+    an outlier, as any channel is: no action for that frame. What is shown (progress, its
+    variance) is the same up to rounding."""
+    demos, takes = _several_takes(which)
     expected = _decisions(FollowerBank(demos), takes)
     shown = _shown(FollowerBank(demos), takes)
     assert any((a >= 0).any() and (a < 0).any() for a in expected)  # rejection at work
-    N, D = X.shape[1], X.shape[2]
+    N, D = max(len(t) for t in takes), takes[0].shape[1]
     rounding = 3.7 + 1e-15 * (np.arange(N) % 2)
     for values, at in ((np.zeros(N), D), (np.full(N, 3.7), D // 2), (rounding, 0)):
         bank = FollowerBank({c: [_with_channel(t, values, at) for t in v]
@@ -595,3 +599,22 @@ def test_a_channel_that_never_moves_changes_no_decision(which):
         np.testing.assert_array_equal(a, b)
     far = [_with_channel(t, rounding + 100.0, 0) for t in takes]
     assert all((a == -1).all() for a in _decisions(bank, far))
+
+
+@pytest.mark.parametrize("which", ["gunpoint", "basic_motions"])
+def test_a_channel_at_rest_with_faint_noise_leaves_the_decisions_nearly_as_they_were(
+        rng, which):
+    """A channel that moves by noise of 1e-6 (the others' spread 1) is a channel, but every
+    model of the bank resolves it no finer than its followers do (``sigma_floor`` times the
+    RMS spread), so it does not turn the input away: 85 % of the frames are decided as without
+    it (measured 99.8 / 91-95 % over six seeds; with the outline and background models at the
+    channel's own scale, 15 / 45 %, most frames rejected)."""
+    demos, takes = _several_takes(which)
+    expected = np.concatenate(_decisions(FollowerBank(demos), takes))
+
+    def noisy(t):
+        return np.hstack([t, 1e-6 * rng.standard_normal((len(t), 1))])
+
+    bank = FollowerBank({c: [noisy(t) for t in v] for c, v in demos.items()})
+    said = np.concatenate(_decisions(bank, [noisy(t) for t in takes]))
+    assert np.mean(said == expected) >= 0.85

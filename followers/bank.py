@@ -159,7 +159,7 @@ class FollowerBank:
             actions, config, resolution=self._forward.resolution, restart=self._forward.restart,
             subframe=fc.subframe, mixture=config.mixture_start if exact is not None else 0.0)
         self._still = build_still(arrays, [list(a.takes) for a in actions], config.still_frames,
-                                  config.still_band, config.end_fraction)
+                                  config.still_band, config.end_fraction, fc.sigma_floor)
         self._still_window = StillWindow(self._still, arrays[0].shape[1])
         self._still_state = StillState()
         # the shown variance widened by the residual's autocorrelation (followers.intervals)

@@ -78,3 +78,11 @@ def layered(*layers):
         alpha = cv2.warpAffine(mask.astype(np.float32), matrix, (W, H))[..., None]
         frame = place(picture, matrix) * alpha + frame * (1 - alpha)
     return frame.astype(np.uint8)
+
+
+def motion_blur(picture, length):
+    """The picture smeared along x over `length` px, as a fast move across the camera does."""
+    import cv2
+    kernel = np.zeros((length, length), np.float32)
+    kernel[length // 2] = 1.0 / length
+    return cv2.filter2D(picture, -1, kernel)

@@ -31,8 +31,8 @@ pytest.importorskip("mediapipe", reason="the markerless trackers need mop[vision
 
 from capture import Status, open_source  # noqa: E402
 from capture.camera.landmarks import HAND_CHANNELS  # noqa: E402
-from camera_pictures import (H, W, card_over, carried, cut_out, layered, place,  # noqa: E402
-                             placement, track, write_video)
+from camera_pictures import (H, W, card_over, carried, cut_out, layered, motion_blur,  # noqa: E402
+                             place, placement, track, write_video)
 
 pytestmark = [pytest.mark.realdata, pytest.mark.slow]   # videos through MediaPipe
 
@@ -309,13 +309,6 @@ def test_a_hand_leaving_across_the_edge_is_sane_then_gone_then_back(tmp_path):
     # back: found by the frame after it is half in view (240 px, frame 15), where it should be
     assert np.isfinite(hand[16:]).all()
     assert wrist_error(values, matrices, "left")[16:].max() < WRIST_PX
-
-
-def motion_blur(picture, length):
-    """The picture smeared along x over `length` px, as a fast move across the camera does."""
-    kernel = np.zeros((length, length), np.float32)
-    kernel[length // 2] = 1.0 / length
-    return cv2.filter2D(picture, -1, kernel)
 
 
 @pytest.mark.parametrize("name", OPEN)

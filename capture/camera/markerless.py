@@ -357,8 +357,9 @@ class FaceMeshTracker(MediapipeTracker):
         found again in a window around it, enlarged, on every frame (the window follows the
         face; the face may move a face's width a frame).
     search_every : while no face is found, the full-range detector searches one frame in this
-        many (default 3), and the frame after a face is lost; 1: every frame. A far face coming
-        into view is found up to `search_every - 1` frames later.
+        many (default 3), and on the frame a face is lost and the next (a face blurred by a fast
+        move is found again when it is sharp); 1: every frame. A far face coming into view is
+        found up to `search_every - 1` frames later.
     min_detection, min_tracking : MediaPipe's confidences for finding a face and for keeping it.
         The face's `min_tracking` is 0.95, not MediaPipe's 0.5: the mesh, tracking a face
         from frame to frame, goes on "seeing" one in a blank card held over it (a head's outline
@@ -463,7 +464,7 @@ class FaceMeshTracker(MediapipeTracker):
         height, width = rgb.shape[:2]
         out = np.full(len(self.channels), np.nan)
         landmarks = None
-        self.searched = False
+        was_seen, self.searched = self.seen, False
         if self._window is None:
             faces, = self._run(rgb, "multi_face_landmarks")
             if faces:
@@ -484,7 +485,11 @@ class FaceMeshTracker(MediapipeTracker):
                 self._restart()            # back to the whole frame: search it afresh
         self.seen = landmarks is not None
         if not self.seen:
-            if not self.searched:
+            if was_seen:
+                # lost: search the next frame too, also after this one was searched in vain (a
+                # face blurred by a fast move is found again when it is sharp)
+                self._search_wait = 0
+            elif not self.searched:
                 self._search_wait -= 1
             return out
         self._search_wait = 0                  # lost after this frame: search the next one

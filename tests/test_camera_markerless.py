@@ -10,6 +10,8 @@ astronaut and matplotlib's Grace Hopper, each a face and an upper body.
 - the face covered, then no one there: NaN and status "not seen", then found again; a card over
   a close face NaN from its first frame, a card over the mouth not;
 - a face far from the camera (under a tenth of the frame): found and measured all the same;
+- a fast move: a jump read where the face went; a blurred face found again when sharp;
+- leaving across the edge: NaN once an outer eye corner is out, found again where it is;
 - the body rotated: the pose tracker's lean follows; no hand in either picture: NaN;
 - the palm search, while no hand is tracked, on one frame in `search_every`;
 - One Euro smoothing on a noisy picture; `mop record` from a camera; the demo's glove performer
@@ -226,6 +228,27 @@ def test_a_fast_move_reads_the_face_where_it_went_and_a_blurred_one_is_back_when
         still = jumped + 1 if jumped != 5 else 0
         assert np.abs(values[jumped, :7] - values[still, :7]).max() < 0.2
         assert np.abs(values[jumped, 7:10] - values[still, 7:10]).max() < 4.0
+
+
+def test_a_face_leaving_across_the_edge_is_nan_once_an_eye_corner_is_out(tmp_path, photo):
+    # the face moves out across the right edge by a fraction of its width, is gone, comes back;
+    # an outer eye corner leaves at about 0.2: the mesh then guesses the half out of view
+    # (blinks up to 0.64, brows +0.5, yaw 16 degrees astray at 0.3-0.6 out)
+    still = place(photo, placement(photo))
+    points = face_points(still)
+    centre, width = points[[234, 454], 0].mean(), np.ptp(points[[234, 454], 0])
+    outs = [0.0, 0.0, 0.1, 0.3, 0.5, 1.2, 1.2, 0.3, 0.0]
+    matrices = [placement(photo, dx=W - width * (0.5 - out) - centre) for out in outs]
+    values = track(tmp_path, [place(photo, m) for m in matrices])
+    assert np.isfinite(values[:3]).all() and np.isfinite(values[-1]).all()
+    # a tenth out: read as at the edge (measured <= 0.11 and 2.9 degrees)
+    assert np.abs(values[2, :7] - values[0, :7]).max() < 0.2
+    assert np.abs(values[2, 7:10] - values[0, 7:10]).max() < 6.0
+    # 0.3 and 0.5 out, gone, 0.3 in again: NaN ("not seen"); back: where it is, no stale face
+    assert np.isnan(values[3:-1]).all()
+    first = np.array([values[0, FACE["head_x"]] * W, values[0, FACE["head_y"]] * H])
+    back = np.array([values[-1, FACE["head_x"]] * W, values[-1, FACE["head_y"]] * H])
+    assert np.linalg.norm(back - carried(first, matrices)[-1]) < 4.0
 
 
 def test_pose_lean_follows_a_rotated_body_and_no_hand_is_nan(tmp_path, photo):

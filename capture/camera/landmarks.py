@@ -73,6 +73,7 @@ _LIP_INNER = (13, 14)        # upper, lower
 _MOUTH_CORNERS = (61, 291)   # right, left
 _FOREHEAD, _NOSE_BASE = 10, 2
 _CHEEKS = (234, 454)
+EYE_CORNERS = (_EYE_R[0], _EYE_L[0])    # outer: their distance (the eye span) is the face's measure
 
 # every face mesh point the face channels read (a tracker need not unpack the others)
 FACE_POINTS = tuple(sorted({*_EYE_R, *_EYE_L, *(k for pair in _LIDS_R + _LIDS_L for k in pair),

@@ -33,7 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .landmarks import (FACE_CHANNELS, FACE_POINTS, HAND_CHANNELS, POSE_CHANNELS,
+from .landmarks import (EYE_CORNERS, FACE_CHANNELS, FACE_POINTS, HAND_CHANNELS, POSE_CHANNELS,
                         face_values, hand_channels, pose_channels)
 from .base import Tracker, _cv2, _image
 
@@ -499,6 +499,10 @@ class FaceMeshTracker(MediapipeTracker):
         for k in FACE_POINTS:        # the points the channels read, not all 478
             point = landmarks[k]
             points[k] = (x0 + point.x * sx, y0 + point.y * sy, point.z * sx)
+        if not all(0 <= points[k][0] < width and 0 <= points[k][1] < height for k in EYE_CORNERS):
+            # an outer eye corner beyond the edge: the eye span, every channel's measure, and
+            # the face's half past it are the mesh's guess (blinks, brows astray): NaN
+            return out
         return face_values(points, width, height, out=out)
 
     def reset(self) -> None:

@@ -80,6 +80,19 @@ def layered(*layers):
     return frame.astype(np.uint8)
 
 
+def head_cut(picture):
+    """(h, w) uint8 mask, 1 on an ellipse round the picture's face (its face mesh: forehead to
+    chin, cheek to cheek, enlarged), to lay a head over other pictures."""
+    import cv2
+    points = pictures.face_points(picture)
+    centre = (points[10] + points[152]) / 2
+    axes = (0.75 * np.linalg.norm(points[454] - points[234]),
+            0.85 * np.linalg.norm(points[152] - points[10]))
+    mask = np.zeros(picture.shape[:2], np.uint8)
+    cv2.ellipse(mask, tuple(int(v) for v in centre), tuple(int(v) for v in axes), 0, 0, 360, 1, -1)
+    return mask
+
+
 def motion_blur(picture, length):
     """The picture smeared along x over `length` px, as a fast move across the camera does."""
     import cv2

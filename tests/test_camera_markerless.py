@@ -12,6 +12,7 @@ astronaut and matplotlib's Grace Hopper, each a face and an upper body.
 - a face far from the camera (under a tenth of the frame): found and measured all the same;
 - a fast move: a jump read where the face went; a blurred face found again when sharp;
 - leaving across the edge: NaN once an outer eye corner is out, found again where it is;
+- a second face passing behind, smaller, or beside, larger: the tracked face is kept;
 - the body rotated: the pose tracker's lean follows; no hand in either picture: NaN;
 - the palm search, while no hand is tracked, on one frame in `search_every`;
 - One Euro smoothing on a noisy picture; `mop record` from a camera; the demo's glove performer
@@ -31,8 +32,9 @@ pytest.importorskip("skimage.data", reason="the astronaut photograph comes with 
 from capture import Status, open_source  # noqa: E402
 from capture.camera.landmarks import (FACE_CHANNELS, HAND_CHANNELS,  # noqa: E402
                                       POSE_CHANNELS)
-from camera_pictures import (ROOT, H, W, card_over, carried, motion_blur,  # noqa: E402
-                             pictures, place, placement, track, write_video)
+from camera_pictures import (ROOT, H, W, card_over, carried, head_cut,  # noqa: E402
+                             layered, motion_blur, pictures, place, placement, track,
+                             write_video)
 
 pytestmark = [pytest.mark.realdata, pytest.mark.slow]   # videos through MediaPipe: minutes
 
@@ -249,6 +251,38 @@ def test_a_face_leaving_across_the_edge_is_nan_once_an_eye_corner_is_out(tmp_pat
     first = np.array([values[0, FACE["head_x"]] * W, values[0, FACE["head_y"]] * H])
     back = np.array([values[-1, FACE["head_x"]] * W, values[-1, FACE["head_y"]] * H])
     assert np.linalg.norm(back - carried(first, matrices)[-1]) < 4.0
+
+
+def face_width(photo):
+    """The photo's face width [px] placed in the frame (cheek to cheek)."""
+    points = face_points(place(photo, placement(photo)))
+    return np.ptp(points[[234, 454], 0])
+
+
+@pytest.mark.parametrize("name, other", [("astronaut", "grace_hopper"),
+                                         ("grace_hopper", "astronaut")])
+def test_the_face_stays_with_the_performer_while_another_passes_or_is_larger(tmp_path, name,
+                                                                           other):
+    # a head cut out of the other photograph passes behind the performer, its face 0.6 times
+    # the performer's, from right to left, then stands beside them, 1.5 times larger, for three
+    # frames: the mesh follows the face it tracks (its own detector runs only when no face is
+    # tracked; detecting on every frame, the astronaut's puppet went to Grace Hopper)
+    photo, other = PHOTOS[name](), PHOTOS[other]()
+    performer = (photo, head_cut(photo), placement(photo, dx=-80))
+    mask = head_cut(other)
+    ratio = face_width(photo) / face_width(other)
+
+    def passer(x, size):
+        return other, mask, placement(other, scale=size * ratio, dx=x)
+
+    frames = ([layered(performer)] * 2
+              + [layered(passer(x, 0.6), performer) for x in (260, 120, -100, -240)]
+              + [layered(performer, passer(230, 1.5))] * 3 + [layered(performer)])
+    values = track(tmp_path, frames)
+    assert np.isfinite(values).all()
+    x = values[:, FACE["head_x"]] * W
+    assert np.ptp(x) < 4.0                                     # [px]; measured <= 1
+    assert np.ptp(values[:, FACE["head_scale"]]) / values[0, FACE["head_scale"]] < 0.05
 
 
 def test_pose_lean_follows_a_rotated_body_and_no_hand_is_nan(tmp_path, photo):

@@ -759,7 +759,9 @@ class PoseTracker(MediapipeTracker):
     (see `capture.camera.landmarks`). MediaPipe's own landmark smoothing is off: takes keep
     raw values, and a source smooths (One Euro) when asked to. Segmentation is off, and the
     landmark model runs without its segmentation head (`landmarks_only`): the same landmarks,
-    to the bit, in about 0.6 of the time."""
+    to the bit, in about 0.6 of the time. A frame on which the body followed from the last one
+    is lost is read again, through the detector: a body that moved fast is found on that
+    frame, not the next."""
     name = "pose"
     channels = POSE_CHANNELS
     scales = (60.0,) * 7 + (0.2,) * 4
@@ -791,6 +793,11 @@ class PoseTracker(MediapipeTracker):
         rgb = self._rgb_of(image)
         height, width = rgb.shape[:2]
         landmarks, world = self._run(rgb, "pose_landmarks", "pose_world_landmarks")
+        if landmarks is None and self.seen:
+            # the body followed on the last frame is lost on this one (a fast move took it out
+            # of the box it is read in): MediaPipe's detector runs on the frame after a loss,
+            # so read this frame again, through the detector, rather than give it up
+            landmarks, world = self._run(rgb, "pose_landmarks", "pose_world_landmarks")
         out = np.full(len(self.channels), np.nan)
         self.seen = landmarks is not None and world is not None
         if not self.seen:

@@ -47,6 +47,7 @@ in metres):
     lean                 [deg] the shoulder line tilted counter-clockwise in the picture:
                          positive (a webcam at a desk rarely sees the hips)
     hand_left.x, hand_left.y, hand_right.x, hand_right.y  the wrists, as image fractions
+                         (a wrist is given with its elbow seen)
 A channel is NaN when one of the points it needs is not visible (visibility < 0.5, or placed
 outside the picture).
 """
@@ -347,7 +348,9 @@ def pose_channels(image: np.ndarray, visibility: np.ndarray, world: np.ndarray, 
         if seen[elbow] and seen[wrist] and seen[_PINKY[side]] and seen[_INDEX[side]]:
             hand = _mid(world[_PINKY[side]], world[_INDEX[side]])
             out[4 + slot] = _angle3(forearm, _sub(hand, world[wrist]))
-        if seen[wrist]:
+        if seen[elbow] and seen[wrist]:
+            # a wrist without its elbow is a guess: with the arm beyond the picture the model
+            # places the wrist just inside its edge, with a visibility over 0.5
             out[7 + 2 * slot], out[8 + 2 * slot] = image[wrist]
     if seen[left] and seen[right]:
         # the performer's right shoulder is on the image's left; y points down, so a line

@@ -43,6 +43,20 @@ def track(tmp_path, frames, tracker="face", **options):
     return values
 
 
+def track_statuses(path, frames, tracker="hands", **options):
+    """The tracker's values (N, channels) and the source's status on each frame, one frame
+    queued at a time (the reader at most two frames ahead of what is read)."""
+    path = write_video(path, frames)
+    rows, statuses = [], []
+    with open_source(f"camera:{path}:{tracker}", realtime=False, queue_size=1,
+                     **options) as source:
+        for frame in source:
+            rows.append(frame.values)
+            statuses.append(source.status)
+    assert len(rows) == len(frames)
+    return np.array(rows), statuses
+
+
 def card_over(picture, points, top=None):
     """A copy of the picture with a grey card over the landmarks (10 px beyond them), from
     `top` [px] down when given."""

@@ -29,10 +29,10 @@ import pytest
 cv2 = pytest.importorskip("cv2")
 pytest.importorskip("mediapipe", reason="the markerless trackers need mop[vision]")
 
-from capture import Status, open_source  # noqa: E402
+from capture import Status  # noqa: E402
 from capture.camera.landmarks import HAND_CHANNELS  # noqa: E402
 from camera_pictures import (H, W, card_over, carried, cut_out, layered, motion_blur,  # noqa: E402
-                             place, placement, track, write_video)
+                             place, placement, track, track_statuses)
 
 pytestmark = [pytest.mark.realdata, pytest.mark.slow]   # videos through MediaPipe
 
@@ -172,19 +172,6 @@ def test_a_mirrored_hand_is_the_other_hand_and_two_hands_keep_their_sides(
     # both in view: each on its side of the picture, on every frame
     assert np.isfinite(values[7:]).all()
     assert (hand[7:, HAND["wrist_x"]] < 0.5).all() and (twin[7:, HAND["wrist_x"]] > 0.5).all()
-
-
-def track_statuses(path, frames, **options):
-    """The hands tracker's values (N, 18) and the source's status on each frame."""
-    path = write_video(path, frames)
-    rows, statuses = [], []
-    with open_source(f"camera:{path}:hands", realtime=False, queue_size=1,
-                     **options) as source:
-        for frame in source:
-            rows.append(frame.values)
-            statuses.append(source.status)
-    assert len(rows) == len(frames)
-    return np.array(rows), statuses
 
 
 def test_a_covered_or_absent_hand_is_nan_and_not_seen_then_found_again(tmp_path, open_hand):

@@ -29,12 +29,12 @@ cv2 = pytest.importorskip("cv2")
 pytest.importorskip("mediapipe", reason="the markerless trackers need mop[vision]")
 pytest.importorskip("skimage.data", reason="the astronaut photograph comes with scikit-image")
 
-from capture import Status, open_source  # noqa: E402
+from capture import Status  # noqa: E402
 from capture.camera.landmarks import (FACE_CHANNELS, HAND_CHANNELS,  # noqa: E402
                                       POSE_CHANNELS)
 from camera_pictures import (ROOT, H, W, card_over, carried, head_cut,  # noqa: E402
                              layered, motion_blur, pictures, place, placement, track,
-                             write_video)
+                             track_statuses, write_video)
 
 pytestmark = [pytest.mark.realdata, pytest.mark.slow]   # videos through MediaPipe: minutes
 
@@ -139,15 +139,7 @@ def test_covered_or_absent_face_is_nan_and_not_seen_then_found_again(tmp_path, p
     empty = np.full((H, W, 3), (90, 100, 110), np.uint8)       # no one there
     back = place(photo, placement(photo, dx=-60, dy=20))       # back, somewhere else
     frames = [still] * 4 + [covered] * 10 + [empty] * 10 + [back] * 4
-    path = write_video(tmp_path / "cover.mkv", frames)
-    rows, statuses = [], []
-    # one frame queued at a time: the reader is at most two frames ahead of what is read
-    with open_source(f"camera:{path}:face", realtime=False, queue_size=1) as source:
-        for frame in source:
-            rows.append(frame.values)
-            statuses.append(source.status)
-    values = np.array(rows)
-    assert len(values) == len(frames)
+    values, statuses = track_statuses(tmp_path / "cover.mkv", frames, tracker="face")
     assert np.isfinite(values[:4]).all()
     assert np.isnan(values[4:24]).all()
     # read in the middle of the covered and of the empty stretches, the source says why

@@ -96,12 +96,11 @@ def outline_step(fmodel, fstate, bmodel, bstate, n_obs):
             scratch[s] = b
             if alpha[k, s] > 0.0 and b > top:
                 top = b
+        for s in range(S):
+            alpha[k, s] *= exp_nonpositive(scratch[s] - top if alpha[k, s] > 0.0 else -np.inf)
         total = 0.0
         for s in range(S):
-            v = alpha[k, s] * exp_nonpositive(scratch[s] - top if alpha[k, s] > 0.0 else
-                                              -np.inf)
-            alpha[k, s] = v
-            total += v
+            total += alpha[k, s]
         for s in range(S):
             alpha[k, s] /= total
         bstate.outline_ll[k] = math.log(total) + top
@@ -200,11 +199,11 @@ def _posterior(bstate):
         if recent[k] > top:
             top = recent[k]
             best = k
-    total = 0.0
     for k in range(recent.shape[0]):
-        v = math.exp(recent[k] - top)
-        posterior[k] = v
-        total += v
+        posterior[k] = math.exp(recent[k] - top)
+    total = 0.0  # summed in a loop that writes nothing: in order wherever the arrays lie
+    for k in range(recent.shape[0]):
+        total += posterior[k]
     for k in range(recent.shape[0]):
         posterior[k] /= total
     return best

@@ -1074,3 +1074,28 @@ def test_a_bank_too_large_for_memory_is_refused_naming_its_size(rng):
                                          r"about .* GB, more than BankConfig.max_bytes"):
         FollowerBank(templates, config=BankConfig(max_bytes=1e3))
     FollowerBank(templates)
+
+
+def test_bank_traces_do_not_depend_on_where_its_arrays_lie(rng):
+    """A bank's state packed back to back in one buffer, forwards and backwards, follows bit
+    for bit as its own arrays do: no sum in a kernel adds in an order chosen by where the
+    arrays lie (a loop that writes one array while summing may run a vector version or a
+    scalar one after a check of how far apart the arrays are)."""
+    templates = {f"a{i}": random_template(rng, 30, 3) + rng.normal(scale=2.0, size=3)
+                 for i in range(4)}
+    bank = FollowerBank(templates)
+    X = time_warp(templates["a1"], 1.3)[0] + rng.normal(scale=0.3, size=(1, 3))
+    own = bank.follow(X)
+    state = bank._bank
+    floats = [f for f in state._fields if getattr(state, f).dtype == np.float64]
+    for order in (floats, floats[::-1]):
+        buffer = np.zeros(sum(getattr(state, f).size for f in order))
+        packed, at = {}, 0
+        for f in order:
+            shape = getattr(state, f).shape
+            packed[f] = buffer[at:at + math.prod(shape)].reshape(shape)
+            at += math.prod(shape)
+        bank._bank = state._replace(**packed)
+        again = bank.follow(X)
+        for key in ("progress", "posteriors", "fits"):
+            np.testing.assert_array_equal(again[key], own[key])

@@ -131,10 +131,11 @@ class FollowerBank:
         model = chain(fc, transitions)
         check_size(arrays, config, levels=model.levels, resolution=model.resolution)
         K = len(arrays)
+        moving = moving_channels([t for a in actions for t in a.takes])
         defaults = sigma is None
         recognition = exact = None
         if defaults:
-            sigmas, recognition, exact = bank_sigmas(actions, config, own)
+            sigmas, recognition, exact = bank_sigmas(actions, config, moving, own)
             if model.kind == "mop":  # the paper's chain scores frames as the paper does
                 recognition = exact = None
         else:
@@ -152,14 +153,16 @@ class FollowerBank:
             exact=exact,
             adaptation=adaptation(fc, fc.adapt_sigma and defaults and model.kind != "mop"),
             report_adaptation=adaptation(fc, defaults),
-            moving=moving_channels([t for a in actions for t in a.takes]))
+            moving=moving)
         self._exact = np.ones((K, arrays[0].shape[1])) if exact is None else exact
         self._demonstrations = actions
         self._model = build_bank_model(
             actions, config, resolution=self._forward.resolution, restart=self._forward.restart,
-            subframe=fc.subframe, mixture=config.mixture_start if exact is not None else 0.0)
+            subframe=fc.subframe, mixture=config.mixture_start if exact is not None else 0.0,
+            moving=moving)
         self._still = build_still(arrays, [list(a.takes) for a in actions], config.still_frames,
-                                  config.still_band, config.end_fraction, fc.sigma_floor)
+                                  config.still_band, config.end_fraction, fc.sigma_floor,
+                                  moving)
         self._still_window = StillWindow(self._still, arrays[0].shape[1])
         self._still_state = StillState()
         # the shown variance widened by the residual's autocorrelation (followers.intervals)

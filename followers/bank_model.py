@@ -25,7 +25,7 @@ from typing import NamedTuple
 import numpy as np
 
 from followers.config import BankConfig
-from followers.defaults import (exact_scales, moving_channels, moving_columns, noise_sigmas,
+from followers.defaults import (exact_scales, moving_columns, noise_sigmas,
                                pooled_sigma, recognition_sigma)
 
 
@@ -125,7 +125,7 @@ def pooled_moments(mean: np.ndarray, variance: np.ndarray, counts: np.ndarray,
     return first, np.maximum(second / total - first * first, 0.0)
 
 
-def bank_sigmas(actions: list, config: BankConfig, own=None):
+def bank_sigmas(actions: list, config: BankConfig, moving: np.ndarray, own=None):
     """(following, recognition, exact) sigmas of the default emission models: K (T_k, D)
     sigmas for the recursion, K for the recognition score, and the exact-repetition
     component's (K, D) scale relative to the following sigma (None: no mixture).
@@ -133,13 +133,13 @@ def bank_sigmas(actions: list, config: BankConfig, own=None):
     actions : K ``followers.demos.Demonstrations``, one take each or several. An action of
     several takes adds their spread (``FollowerConfig.spread_weight`` of its square) to both
     sigmas per state, and its exact component is as narrow as its takes' own noise.
+    moving : (D,) bool, the channels that move in the takes (``defaults.moving_channels``).
     own : K (T_k, D) sigmas or None (a trained follower's per-state spread, say): that
     action's base sigma, floored at the pooled default; None: the pooled default."""
     arrays = [a.template for a in actions]
     own = own or [None] * len(arrays)
     takes = [t for a in actions for t in a.takes]
     pooled = pooled_sigma(takes, config.follower)
-    moving = moving_channels(takes)
     bases = [np.broadcast_to(pooled, a.shape) if o is None else np.maximum(o, pooled)
              for a, o in zip(arrays, own)]
     offsets = np.cumsum([0] + [a.shape[0] for a in arrays[:-1]])
@@ -219,11 +219,12 @@ def moving_outlines(stacked: np.ndarray, moving: np.ndarray, lengths: np.ndarray
 
 def build_bank_model(actions: list, config: BankConfig, *, resolution: int,
                      restart: tuple[float, float], subframe: bool,
-                     mixture: float) -> BankModel:
+                     mixture: float, moving: np.ndarray) -> BankModel:
     """The bank's model for ``actions`` (K ``followers.demos.Demonstrations``);
     ``resolution``: the followers' states per template frame; ``restart``: their chain's (from
     anywhere, from the last state) per frame; ``subframe``: the shown follower reports inside
-    its cells; ``mixture``: the exact component's starting weight (0: no mixture)."""
+    its cells; ``mixture``: the exact component's starting weight (0: no mixture); ``moving``:
+    (D,) bool, the channels that move in the takes."""
     c = config
     K = len(actions)
     takes = [t for a in actions for t in a.takes]
@@ -231,7 +232,7 @@ def build_bank_model(actions: list, config: BankConfig, *, resolution: int,
     lengths = np.array([t.shape[0] for t in takes])
     stacked = np.concatenate(takes, axis=0)
     outline_mean, variance, spread, background_mean = moving_outlines(
-        stacked, moving_channels(takes), lengths, min(c.outline_states, lengths.min()), c,
+        stacked, moving, lengths, min(c.outline_states, lengths.min()), c,
         owner)
     rejecting = math.isfinite(c.reject_margin)
     hysteresis = c.reject_hysteresis if rejecting else 0.0

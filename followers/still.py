@@ -34,7 +34,7 @@ from typing import NamedTuple
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 
-from followers.defaults import moving_channels, moving_rms
+from followers.defaults import moving_rms
 
 # an action is a "still action" when more than this share of its takes' frames are still
 STILL_ACTION_SHARE = 0.5
@@ -74,13 +74,13 @@ def still_mask(X: np.ndarray, frames: int, band: np.ndarray) -> np.ndarray:
 
 
 def build_still(templates: list[np.ndarray], takes: list[list[np.ndarray]], frames: int,
-                band: float, end: float, floor: float = 0.0) -> StillModel:
+                band: float, end: float, floor: float, moving: np.ndarray) -> StillModel:
     """The still stage of a bank of ``templates`` (K (T_k, D)) demonstrated by ``takes``
     (per action its (T_i, D) takes); ``frames``: window [frames] (0: off); ``band``: x each
     channel's spread over every take, floored at ``floor`` times their RMS (as the default
-    sigma is); ``end``: the bank's end fraction."""
+    sigma is); ``end``: the bank's end fraction; ``moving``: (D,) bool, the channels that move
+    in the takes (``defaults.moving_channels``)."""
     every = np.concatenate([t for action in takes for t in action], axis=0)
-    moving = moving_channels([every])
     spread = every.std(axis=0)
     spread = np.maximum(spread, floor * moving_rms(spread, moving))
     # a channel that never moves is not judged (live it is left out, or an outlier)
